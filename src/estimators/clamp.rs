@@ -1,0 +1,79 @@
+//! Clamping: every sample above `c` counts as `c`. Biased downwards by `E[(S - c)+]`, but
+//! bounded variance; the cheapest firefly remedy renderers ship, and the baseline robust
+//! methods must beat.
+
+use super::{Estimator, EstimatorSpec, Neumaier, empty};
+use crate::error::{Error, Result};
+use std::fmt;
+
+/// Mean of `min(S, c)`.
+#[derive(Debug, Clone)]
+pub struct Clamp {
+    c: f64,
+    sum: Neumaier,
+    n: u64,
+}
+
+impl Clamp {
+    /// A clamp at `c`, which must be finite and positive.
+    pub fn new(c: f64) -> Result<Self> {
+        if !(c > 0.0 && c.is_finite()) {
+            return Err(Error::param("c", c, "must be finite and > 0"));
+        }
+        Ok(Clamp {
+            c,
+            sum: Neumaier::new(),
+            n: 0,
+        })
+    }
+
+    /// The clamping threshold.
+    pub fn threshold(&self) -> f64 {
+        self.c
+    }
+}
+
+impl fmt::Display for Clamp {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Clamp(c={})", self.c)
+    }
+}
+
+impl Estimator for Clamp {
+    #[inline]
+    fn push(&mut self, sample: f64) {
+        self.sum.add(sample.min(self.c));
+        self.n += 1;
+    }
+
+    fn push_slice(&mut self, samples: &[f64]) {
+        for &s in samples {
+            self.sum.add(s.min(self.c));
+        }
+        self.n += samples.len() as u64;
+    }
+
+    fn count(&self) -> u64 {
+        self.n
+    }
+
+    fn estimate(&self) -> Result<f64> {
+        if self.n == 0 {
+            return Err(empty(self));
+        }
+        Ok(self.sum.value() / self.n as f64)
+    }
+
+    fn state_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        EstimatorSpec::Clamp { c: self.c }
+    }
+
+    fn reset(&mut self) {
+        self.sum = Neumaier::new();
+        self.n = 0;
+    }
+}

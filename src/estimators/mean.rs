@@ -1,0 +1,64 @@
+//! The plain sample mean ([B] eq. 1): unbiased, and the reference every robust method is
+//! compared with. Compensated summation keeps it exact over 10^8-sample streams.
+
+use super::{Estimator, EstimatorSpec, Neumaier, empty};
+use crate::error::Result;
+use std::fmt;
+
+/// Neumaier sum of the samples divided by their count.
+#[derive(Debug, Clone, Default)]
+pub struct Mean {
+    sum: Neumaier,
+    n: u64,
+}
+
+impl Mean {
+    /// An empty mean (there are no parameters to check).
+    pub fn new() -> Self {
+        Self::default()
+    }
+}
+
+impl fmt::Display for Mean {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Mean")
+    }
+}
+
+impl Estimator for Mean {
+    #[inline]
+    fn push(&mut self, sample: f64) {
+        self.sum.add(sample);
+        self.n += 1;
+    }
+
+    fn push_slice(&mut self, samples: &[f64]) {
+        for &s in samples {
+            self.sum.add(s);
+        }
+        self.n += samples.len() as u64;
+    }
+
+    fn count(&self) -> u64 {
+        self.n
+    }
+
+    fn estimate(&self) -> Result<f64> {
+        if self.n == 0 {
+            return Err(empty(self));
+        }
+        Ok(self.sum.value() / self.n as f64)
+    }
+
+    fn state_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        EstimatorSpec::Mean
+    }
+
+    fn reset(&mut self) {
+        *self = Self::default();
+    }
+}

@@ -1,0 +1,17 @@
+//! # fireflies
+//!
+//! Validates robust Monte Carlo pixel estimators — the mean, clamping, median of means and its
+//! Gini-adaptive variants, Jung et al.'s dynamic MoN, Zirr et al.'s firefly reweighting and
+//! Pajot et al.'s outlier delaying — on heavy-tailed samples whose true mean is known exactly.
+//!
+//! Layers (arrows point down): the command line -> [`dist`] -> [`estimators`] -> [`error`].
+//! The estimator contract, with worked examples, is `spec/estimators.md`.
+
+#![deny(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod error;
+pub mod estimators;
+
+pub use error::{Error, Result};
+pub use estimators::{Bank, Estimator, EstimatorSpec};
