@@ -76,6 +76,18 @@ pub enum Error {
         /// The offending token.
         token: String,
     },
+    /// A number in a sample file that is not a valid sample (NaN, infinite or negative).
+    #[error("{file}:{line}: invalid sample at index {index}: {value}")]
+    InvalidSampleInFile {
+        /// File name (`-` for stdin).
+        file: String,
+        /// 1-based line number.
+        line: usize,
+        /// Position of the sample in the file's stream (0-based).
+        index: u64,
+        /// The sample itself.
+        value: f64,
+    },
     /// Reading or writing a file failed.
     #[error("{path}: {message}")]
     Io {

@@ -10,8 +10,12 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod dist;
 pub mod error;
 pub mod estimators;
+pub mod harness;
+pub mod report;
+pub mod samples;
 
 pub use error::{Error, Result};
 pub use estimators::{Bank, Estimator, EstimatorSpec};

@@ -32,3 +32,11 @@ macro_rules! placeholder {
 }
 placeholder!(Zirr);
 placeholder!(ZirrRef);
+impl Zirr {
+    /// Placeholder.
+    pub fn block_estimate(_b: &[Option<&Self>; 9]) -> Result<(f64, super::Extras)> { Err(Error::EmptyStream(String::new())) }
+}
+impl ZirrRef {
+    /// Placeholder.
+    pub fn block_estimate(_b: &[Option<&Self>; 9]) -> Result<(f64, super::Extras)> { Err(Error::EmptyStream(String::new())) }
+}

@@ -1,0 +1,33 @@
+//! Subcommands of the `fireflies` binary; each lives in its own module.
+
+mod eval;
+mod run;
+
+use clap::{Parser, Subcommand};
+use fireflies::Result;
+use std::process::ExitCode;
+
+/// Validates robust Monte Carlo pixel estimators on heavy-tailed samples.
+#[derive(Debug, Parser)]
+#[command(name = "fireflies", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Evaluate estimators on sample files (one JSON object per estimator on stdout).
+    Eval(eval::EvalArgs),
+    /// Run an experiment (default: the embedded one) and write its report.
+    Run(run::RunArgs),
+}
+
+/// Runs the chosen subcommand; `Err` exits with status 2.
+pub fn run(cli: Cli) -> Result<ExitCode> {
+    match cli.command {
+        Some(Command::Eval(args)) => eval::run(&args),
+        Some(Command::Run(args)) => run::run(&args),
+        None => run::run(&run::RunArgs::default()),
+    }
+}

@@ -1,0 +1,72 @@
+//! `fireflies run`: an experiment from a TOML file (or the embedded default) to a report.
+
+use clap::Args;
+use fireflies::harness::{self, Experiment, RunOptions};
+use fireflies::{Result, report};
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Args, Default)]
+pub struct RunArgs {
+    /// Experiment file; without it, the embedded `experiments/default.toml`.
+    experiment: Option<PathBuf>,
+    /// Report directory (default: `reports/<experiment name>`).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Overrides the experiment's trial count.
+    #[arg(long)]
+    trials: Option<u64>,
+    /// Worker threads (default: one per core). Results do not depend on it.
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+pub fn run(args: &RunArgs) -> Result<ExitCode> {
+    let exp = match &args.experiment {
+        Some(path) => Experiment::load(path)?,
+        None => Experiment::default_experiment()?,
+    };
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("reports").join(&exp.name));
+    // Fail on an unwritable directory before spending the run.
+    std::fs::create_dir_all(&dir).map_err(|e| fireflies::Error::io(dir.display(), &e))?;
+    let opts = RunOptions {
+        trials: args.trials,
+        threads: args.threads,
+        progress: std::io::stderr().is_terminal(),
+    };
+    eprintln!(
+        "running {} ({} distributions x {} estimators, {} trials, n up to {})",
+        exp.name,
+        exp.distributions.len(),
+        exp.estimators.len(),
+        opts.trials.unwrap_or(exp.file.trials),
+        exp.max_n()
+    );
+    let out = harness::run(&exp, &opts)?;
+    let checks = harness::checks::evaluate(&exp, &out);
+    report::write_tables(&dir, &exp, &out, &checks)?;
+    let failed: Vec<_> = checks.iter().filter(|c| !c.passed).collect();
+    eprintln!(
+        "wrote {} in {:.1} s ({:.3e} samples/s); {} checks, {} failed",
+        dir.display(),
+        out.wall_s,
+        out.samples_per_s(),
+        checks.len(),
+        failed.len()
+    );
+    for c in &failed {
+        eprintln!(
+            "FAILED {} on {} / {} at n = {}: {} (observed {}, p = {:.3e})",
+            c.check, c.distribution, c.estimator, c.n, c.claim, c.observed, c.p_value
+        );
+    }
+    Ok(if failed.is_empty() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}

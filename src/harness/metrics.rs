@@ -1,0 +1,490 @@
+//! Accuracy metrics over independent trials (spec §7), as mergeable accumulators.
+//!
+//! Each (distribution, estimator, n) cell keeps central moments of the estimate, of its
+//! squared error and of its absolute relative error, a log-binned histogram of the absolute
+//! relative error (for quantiles: no per-trial list is stored, so a million trials cost the
+//! same memory as a thousand), and event counts. Accumulators merge exactly; the runner
+//! merges fixed-size trial chunks in chunk order, so results do not depend on thread count.
+//!
+//! The median absolute relative error is the primary metric: it and its order-statistic
+//! interval stay meaningful when the estimator's error has infinite variance, where the
+//! variance and MSE intervals do not. Quantiles come from the histogram, so they are exact to
+//! within one bin: a factor `10^(1/BINS_PER_DECADE)` (2.3%).
+
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// Two-sided 95% normal quantile used by every interval (spec §7).
+pub const Z: f64 = 1.96;
+
+/// Histogram resolution of the relative-error quantiles.
+pub const BINS_PER_DECADE: f64 = 100.0;
+
+/// Running count, mean and central moments M2..M4, with Pébay's exact pairwise merge.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Moments {
+    n: u64,
+    mean: f64,
+    m2: f64,
+    m3: f64,
+    m4: f64,
+}
+
+impl Moments {
+    /// Adds one observation (Terriberry's update).
+    pub fn push(&mut self, x: f64) {
+        let n1 = self.n as f64;
+        self.n += 1;
+        let n = self.n as f64;
+        let delta = x - self.mean;
+        let dn = delta / n;
+        let dn2 = dn * dn;
+        let term1 = delta * dn * n1;
+        self.mean += dn;
+        self.m4 += term1 * dn2 * (n * n - 3.0 * n + 3.0) + 6.0 * dn2 * self.m2 - 4.0 * dn * self.m3;
+        self.m3 += term1 * dn * (n - 2.0) - 3.0 * dn * self.m2;
+        self.m2 += term1;
+    }
+
+    /// Combines with another accumulator as if all observations had gone through one.
+    pub fn merge(&mut self, b: &Moments) {
+        if b.n == 0 {
+            return;
+        }
+        if self.n == 0 {
+            *self = *b;
+            return;
+        }
+        let (na, nb) = (self.n as f64, b.n as f64);
+        let n = na + nb;
+        let d = b.mean - self.mean;
+        let (d2, d3, d4) = (d * d, d * d * d, d * d * d * d);
+        let m2 = self.m2 + b.m2 + d2 * na * nb / n;
+        let m3 = self.m3
+            + b.m3
+            + d3 * na * nb * (na - nb) / (n * n)
+            + 3.0 * d * (na * b.m2 - nb * self.m2) / n;
+        let m4 = self.m4
+            + b.m4
+            + d4 * na * nb * (na * na - na * nb + nb * nb) / (n * n * n)
+            + 6.0 * d2 * (na * na * b.m2 + nb * nb * self.m2) / (n * n)
+            + 4.0 * d * (na * b.m3 - nb * self.m3) / n;
+        self.mean += d * nb / n;
+        self.n += b.n;
+        (self.m2, self.m3, self.m4) = (m2, m3, m4);
+    }
+
+    /// Number of observations.
+    pub fn count(&self) -> u64 {
+        self.n
+    }
+
+    /// Mean.
+    pub fn mean(&self) -> f64 {
+        self.mean
+    }
+
+    /// Sample variance (divisor n - 1).
+    pub fn sample_variance(&self) -> f64 {
+        self.m2 / (self.n as f64 - 1.0)
+    }
+
+    /// Fourth central moment with divisor n.
+    pub fn m4(&self) -> f64 {
+        self.m4 / self.n as f64
+    }
+
+    /// Standard error of the mean, `s / sqrt(n)`.
+    pub fn standard_error(&self) -> f64 {
+        (self.sample_variance() / self.n as f64).sqrt()
+    }
+}
+
+/// Log-binned histogram of non-negative values; zeros have their own bin. Integer counts, so
+/// merging is exact in any order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LogHistogram {
+    zeros: u64,
+    bins: BTreeMap<i32, u64>,
+}
+
+impl LogHistogram {
+    /// Adds a value (non-finite values land in the top bin).
+    pub fn push(&mut self, x: f64) {
+        if x <= 0.0 {
+            self.zeros += 1;
+            return;
+        }
+        let bin = (x.log10() * BINS_PER_DECADE).floor().clamp(-40_000.0, 40_000.0) as i32;
+        *self.bins.entry(bin).or_insert(0) += 1;
+    }
+
+    /// Adds another histogram's counts.
+    pub fn merge(&mut self, other: &LogHistogram) {
+        self.zeros += other.zeros;
+        for (&b, &c) in &other.bins {
+            *self.bins.entry(b).or_insert(0) += c;
+        }
+    }
+
+    /// Total count.
+    pub fn count(&self) -> u64 {
+        self.zeros + self.bins.values().sum::<u64>()
+    }
+
+    /// The `rank`-th smallest value (1-based), as its bin's geometric centre.
+    pub fn order_statistic(&self, rank: u64) -> f64 {
+        let mut seen = self.zeros;
+        if rank <= seen {
+            return 0.0;
+        }
+        for (&b, &c) in &self.bins {
+            seen += c;
+            if rank <= seen {
+                return 10f64.powf((f64::from(b) + 0.5) / BINS_PER_DECADE);
+            }
+        }
+        f64::INFINITY
+    }
+
+    /// The q-quantile (`q` in [0, 1]) by the nearest-rank rule.
+    pub fn quantile(&self, q: f64) -> f64 {
+        let n = self.count();
+        let rank = ((q * n as f64).ceil() as u64).clamp(1, n.max(1));
+        self.order_statistic(rank)
+    }
+}
+
+/// A point estimate with a 95% confidence interval (`None` bounds where none is meaningful).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Interval {
+    /// Point estimate.
+    pub value: f64,
+    /// Lower bound.
+    pub low: Option<f64>,
+    /// Upper bound.
+    pub high: Option<f64>,
+}
+
+impl Interval {
+    /// `value ± Z·se`.
+    pub fn symmetric(value: f64, se: f64) -> Self {
+        Interval {
+            value,
+            low: Some(value - Z * se),
+            high: Some(value + Z * se),
+        }
+    }
+
+    /// A value with no interval.
+    pub fn bare(value: f64) -> Self {
+        Interval {
+            value,
+            low: None,
+            high: None,
+        }
+    }
+}
+
+/// Wilson score interval for `successes` out of `trials` (spec §7).
+pub fn wilson(successes: u64, trials: u64) -> Interval {
+    let m = trials as f64;
+    let p = successes as f64 / m;
+    let z2 = Z * Z;
+    let centre = (p + z2 / (2.0 * m)) / (1.0 + z2 / m);
+    let half = Z * (p * (1.0 - p) / m + z2 / (4.0 * m * m)).sqrt() / (1.0 + z2 / m);
+    Interval {
+        value: p,
+        low: Some((centre - half).max(0.0)),
+        high: Some((centre + half).min(1.0)),
+    }
+}
+
+/// Mergeable per-cell statistics of one estimator at one sample count.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CellAccumulator {
+    estimate: Moments,
+    squared_error: Moments,
+    abs_rel_error: Moments,
+    abs_rel_hist: LogHistogram,
+    /// Paired difference of absolute relative error against the mean on the same trial.
+    paired_abs_rel: Moments,
+    /// Paired difference of squared error against the mean on the same trial.
+    paired_squared: Moments,
+    fireflies: u64,
+    outlier_trials: u64,
+    rejected: u64,
+    /// Trials where this estimator gave a firefly and the mean did not.
+    firefly_not_mean: u64,
+    /// Trials where the mean gave a firefly and this estimator did not.
+    mean_not_firefly: u64,
+    /// A bound on `|X - mu|` a check tests (Chebyshev, median-of-means), if any.
+    deviation_threshold: Option<f64>,
+    /// Trials with `|X - mu| > deviation_threshold`.
+    exceedances: u64,
+}
+
+/// One trial's observation for a cell.
+#[derive(Debug, Clone, Copy)]
+pub struct Observation {
+    /// The estimator's estimate.
+    pub estimate: f64,
+    /// The plain mean's estimate on the same samples (for paired differences).
+    pub mean_estimate: f64,
+    /// Whether the trial's first n samples hold one at or above `n mu` ([Z] eq. 4).
+    pub outlier: bool,
+}
+
+impl CellAccumulator {
+    /// An empty cell that also counts trials whose error exceeds `threshold`.
+    pub fn with_deviation_threshold(threshold: Option<f64>) -> Self {
+        CellAccumulator {
+            deviation_threshold: threshold,
+            ..Self::default()
+        }
+    }
+
+    /// The deviation bound being counted, and how many trials exceeded it.
+    pub fn exceedances(&self) -> Option<(f64, u64)> {
+        self.deviation_threshold.map(|t| (t, self.exceedances))
+    }
+
+    /// Discordant firefly pairs against the mean: (this estimator only, the mean only).
+    pub fn firefly_discordance(&self) -> (u64, u64) {
+        (self.firefly_not_mean, self.mean_not_firefly)
+    }
+
+    /// Trials whose estimate exceeded `(1 + tau) mu`.
+    pub fn fireflies(&self) -> u64 {
+        self.fireflies
+    }
+
+    /// The estimate's moments (for checks).
+    pub fn estimate_moments(&self) -> &Moments {
+        &self.estimate
+    }
+
+    /// Adds one trial against the true mean `mu` with firefly threshold `(1 + tau) mu`.
+    pub fn push(&mut self, o: Observation, mu: f64, tau: f64) {
+        let err = o.estimate - mu;
+        let rel = err.abs() / mu;
+        self.estimate.push(o.estimate);
+        self.squared_error.push(err * err);
+        self.abs_rel_error.push(rel);
+        self.abs_rel_hist.push(rel);
+        let mean_err = o.mean_estimate - mu;
+        self.paired_abs_rel.push(rel - mean_err.abs() / mu);
+        self.paired_squared.push(err * err - mean_err * mean_err);
+        let firefly = o.estimate > (1.0 + tau) * mu;
+        let mean_firefly = o.mean_estimate > (1.0 + tau) * mu;
+        self.fireflies += u64::from(firefly);
+        self.firefly_not_mean += u64::from(firefly && !mean_firefly);
+        self.mean_not_firefly += u64::from(mean_firefly && !firefly);
+        if let Some(t) = self.deviation_threshold {
+            self.exceedances += u64::from(err.abs() > t);
+        }
+        self.outlier_trials += u64::from(o.outlier);
+        self.rejected += u64::from(o.outlier && !firefly);
+    }
+
+    /// Adds another accumulator's trials.
+    pub fn merge(&mut self, b: &CellAccumulator) {
+        self.estimate.merge(&b.estimate);
+        self.squared_error.merge(&b.squared_error);
+        self.abs_rel_error.merge(&b.abs_rel_error);
+        self.abs_rel_hist.merge(&b.abs_rel_hist);
+        self.paired_abs_rel.merge(&b.paired_abs_rel);
+        self.paired_squared.merge(&b.paired_squared);
+        self.fireflies += b.fireflies;
+        self.outlier_trials += b.outlier_trials;
+        self.rejected += b.rejected;
+        self.firefly_not_mean += b.firefly_not_mean;
+        self.mean_not_firefly += b.mean_not_firefly;
+        self.exceedances += b.exceedances;
+    }
+
+    /// Trials accumulated.
+    pub fn trials(&self) -> u64 {
+        self.estimate.count()
+    }
+
+    /// Every metric with its interval; `None` with fewer than 4 trials (spec §7).
+    pub fn metrics(&self, mu: f64) -> Option<CellMetrics> {
+        let t = self.trials();
+        if t < 4 {
+            return None;
+        }
+        let tf = t as f64;
+        let s2 = self.estimate.sample_variance();
+        let var_se = ((self.estimate.m4() - s2 * s2 * (tf - 3.0) / (tf - 1.0)) / tf)
+            .max(0.0)
+            .sqrt();
+        let mse = self.squared_error.mean();
+        let mse_se = self.squared_error.standard_error();
+        let rel_rmse = mse.sqrt() / mu;
+        let relative_rmse = if mse > 0.0 {
+            Interval::symmetric(rel_rmse, mse_se / (2.0 * mu * mse.sqrt()))
+        } else {
+            Interval::bare(rel_rmse)
+        };
+        let half_width = Z * tf.sqrt() / 2.0;
+        let j = ((tf / 2.0 - half_width).floor() as u64).max(1);
+        let k = ((1.0 + tf / 2.0 + half_width).ceil() as u64).min(t);
+        let h = &self.abs_rel_hist;
+        let median = if t % 2 == 1 {
+            h.order_statistic(t / 2 + 1)
+        } else {
+            (h.order_statistic(t / 2) + h.order_statistic(t / 2 + 1)) / 2.0
+        };
+        Some(CellMetrics {
+            trials: t,
+            bias: Interval::symmetric(self.estimate.mean() - mu, self.estimate.standard_error()),
+            variance: Interval::symmetric(s2, var_se),
+            mse: Interval::symmetric(mse, mse_se),
+            relative_rmse,
+            median_abs_rel_error: Interval {
+                value: median,
+                low: Some(h.order_statistic(j)),
+                high: Some(h.order_statistic(k)),
+            },
+            mean_abs_rel_error: Interval::symmetric(
+                self.abs_rel_error.mean(),
+                self.abs_rel_error.standard_error(),
+            ),
+            rel_error_quantiles: [0.05, 0.25, 0.5, 0.75, 0.95, 0.99].map(|q| (q, h.quantile(q))),
+            firefly_rate: wilson(self.fireflies, t),
+            outlier_trials: self.outlier_trials,
+            rejection_rate: (self.outlier_trials > 0)
+                .then(|| wilson(self.rejected, self.outlier_trials)),
+            paired_abs_rel_vs_mean: Interval::symmetric(
+                self.paired_abs_rel.mean(),
+                self.paired_abs_rel.standard_error(),
+            ),
+            paired_mse_vs_mean: Interval::symmetric(
+                self.paired_squared.mean(),
+                self.paired_squared.standard_error(),
+            ),
+        })
+    }
+}
+
+/// All metrics of one cell, each with its interval.
+#[derive(Debug, Clone, Serialize)]
+pub struct CellMetrics {
+    /// Number of trials T.
+    pub trials: u64,
+    /// `mean(X) - mu`.
+    pub bias: Interval,
+    /// Sample variance of the estimates (divisor T - 1).
+    pub variance: Interval,
+    /// Mean squared error against the true mean.
+    pub mse: Interval,
+    /// `sqrt(MSE) / mu` (delta-method interval).
+    pub relative_rmse: Interval,
+    /// Median of `|X - mu| / mu` (primary metric), order-statistic interval.
+    pub median_abs_rel_error: Interval,
+    /// Mean of `|X - mu| / mu`.
+    pub mean_abs_rel_error: Interval,
+    /// Quantiles `(q, value)` of `|X - mu| / mu`.
+    pub rel_error_quantiles: [(f64, f64); 6],
+    /// `P(X > (1 + tau) mu)`, Wilson interval.
+    pub firefly_rate: Interval,
+    /// Trials holding a sample at or above `n mu`.
+    pub outlier_trials: u64,
+    /// Among outlier trials, the fraction whose estimate stayed at or below `(1 + tau) mu`.
+    pub rejection_rate: Option<Interval>,
+    /// Mean over trials of `|X - mu|/mu - |mean - mu|/mu` (negative: better than the mean).
+    pub paired_abs_rel_vs_mean: Interval,
+    /// Mean over trials of `(X - mu)^2 - (mean - mu)^2` (negative: better than the mean).
+    pub paired_mse_vs_mean: Interval,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn accumulate(xs: &[f64], mu: f64) -> CellAccumulator {
+        let mut acc = CellAccumulator::default();
+        for &x in xs {
+            let o = Observation {
+                estimate: x,
+                mean_estimate: mu,
+                outlier: false,
+            };
+            acc.push(o, mu, 1.0);
+        }
+        acc
+    }
+
+    #[test]
+    fn mse_decomposes_into_bias_and_variance() {
+        let xs = [0.9, 1.3, 0.7, 1.1, 5.0, 0.95];
+        let m = accumulate(&xs, 1.0).metrics(1.0).unwrap();
+        let t = xs.len() as f64;
+        let lhs = m.mse.value;
+        let rhs = m.bias.value.powi(2) + (t - 1.0) / t * m.variance.value;
+        assert!((lhs - rhs).abs() < 1e-12 * lhs, "{lhs} vs {rhs}");
+        assert_eq!(m.firefly_rate.value, 1.0 / 6.0);
+    }
+
+    #[test]
+    fn merged_moments_equal_single_pass() {
+        let xs: Vec<f64> = (0..1000).map(|i| ((i * 7919) % 1013) as f64 / 17.0).collect();
+        let mut all = Moments::default();
+        xs.iter().for_each(|&x| all.push(x));
+        let mut parts = Moments::default();
+        for chunk in xs.chunks(37) {
+            let mut m = Moments::default();
+            chunk.iter().for_each(|&x| m.push(x));
+            parts.merge(&m);
+        }
+        for (a, b) in [
+            (all.mean, parts.mean),
+            (all.m2, parts.m2),
+            (all.m3, parts.m3),
+            (all.m4, parts.m4),
+        ] {
+            assert!((a - b).abs() <= 1e-9 * a.abs().max(1.0), "{a} vs {b}");
+        }
+        // Against a direct two-pass computation.
+        let mean = xs.iter().sum::<f64>() / 1000.0;
+        let m4: f64 = xs.iter().map(|x| (x - mean).powi(4)).sum::<f64>();
+        assert!((all.m4 - m4).abs() < 1e-9 * m4);
+    }
+
+    #[test]
+    fn wilson_matches_hand_computation() {
+        // p = 0.5 over 100 trials: half-width 1.96*sqrt(0.0025 + 1.96^2/40000)/(1 + 1.96^2/100).
+        let w = wilson(50, 100);
+        let half = 1.96 * (0.0025f64 + 3.8416 / 40000.0).sqrt() / 1.038416;
+        assert!((w.low.unwrap() - (0.5 - half)).abs() < 1e-12);
+        assert!((w.high.unwrap() - (0.5 + half)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn median_interval_uses_order_statistics_within_a_bin() {
+        // abs rel errors 0.01..1.00; j = floor(50 - 9.8) = 40, k = ceil(51 + 9.8) = 61.
+        let xs: Vec<f64> = (1..=100).map(|i| 1.0 + i as f64 / 100.0).collect();
+        let m = accumulate(&xs, 1.0).metrics(1.0).unwrap();
+        let bin = 10f64.powf(1.0 / BINS_PER_DECADE);
+        let within = |got: f64, want: f64| got / want < bin && want / got < bin;
+        assert!(within(m.median_abs_rel_error.value, 0.505));
+        assert!(within(m.median_abs_rel_error.low.unwrap(), 0.40));
+        assert!(within(m.median_abs_rel_error.high.unwrap(), 0.61));
+    }
+
+    #[test]
+    fn histogram_merge_is_order_free() {
+        let mut a = LogHistogram::default();
+        let mut b = LogHistogram::default();
+        [0.0, 1e-3, 2.0, 5e5].iter().for_each(|&x| a.push(x));
+        [3.0, 0.0].iter().for_each(|&x| b.push(x));
+        let mut ab = a.clone();
+        ab.merge(&b);
+        let mut ba = b.clone();
+        ba.merge(&a);
+        assert_eq!(ab, ba);
+        assert_eq!(ab.count(), 6);
+        assert_eq!(ab.order_statistic(2), 0.0);
+    }
+}

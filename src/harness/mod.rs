@@ -1,0 +1,11 @@
+//! Trials at scale: experiment files, the runner, metrics with confidence intervals, and the
+//! checks that turn them into pass/fail verdicts with stated error rates.
+
+pub mod checks;
+pub mod experiment;
+pub mod metrics;
+pub mod runner;
+
+pub use checks::CheckResult;
+pub use experiment::Experiment;
+pub use runner::{RunOptions, RunOutput, run};
