@@ -534,3 +534,24 @@ fn gmonb_threshold_is_inclusive() {
     assert_rel(est("gmonb:M=2,threshold=0.5", &xs), 4.0 / 3.0, REL);
     assert_rel(est("gmonb:M=2,threshold=0.4999999999999999", &xs), 2.0, REL);
 }
+
+#[test]
+fn gini_of_equal_set_means_is_clamped_to_zero() {
+    // theta = (0.7, 0.7): s1 = 1.4, s2 = 2.1, and in f64 (2*2.1)/(2*1.4) - 3/2 = -2.2e-16.
+    // Spec §3: G = max(G, 0), so the diagnostic reports exactly 0, never a negative value.
+    let (s1, s2) = (0.7 + 0.7, 1.0 * 0.7 + 2.0 * 0.7);
+    assert!(
+        (2.0 * s2) / (2.0 * s1) - 1.5 < 0.0,
+        "the case must round below zero"
+    );
+    for (m, xs) in [
+        (2, vec![0.7, 0.7]),
+        (2, vec![3.3, 3.3, 3.3, 3.3]),
+        (6, vec![0.3; 6]),
+    ] {
+        let g = est(&format!("gini:M={m}"), &xs);
+        assert_eq!(g.to_bits(), 0.0f64.to_bits(), "M = {m}: Gini = {g:e}");
+        let e = run(&format!("gmonb:M={m}"), &xs);
+        assert_eq!(extra(e.as_ref(), "gini"), Some(Extra::Float(0.0)));
+    }
+}

@@ -460,6 +460,7 @@ fn malformed_specs_are_errors() {
         "mon",        // M is required
         "gmon:M=5.0", // integer literal only
         "mon:M=-1",   // not a non-negative integer
+        "mon:M=+5",   // a sign is not part of an integer literal (strict reading of §1a)
         "jung:sigma_image=1,m_max=17.0",
         "gmonb:M=5,M=5", // a key given twice
         "gmonb:M=5,threshold=0.2,threshold=0.3",

@@ -22,7 +22,7 @@ pub struct LogNormal {
 
 impl LogNormal {
     /// Checked constructor: `mu` finite, `sigma` finite and > 0 (a zero spread is a point
-    /// mass), and the mean `exp(mu + sigma^2 / 2)` must fit in f64.
+    /// mass), and the mean and variance must be positive f64s (no overflow or underflow).
     pub fn new(mu: f64, sigma: f64) -> Result<Self> {
         if !mu.is_finite() {
             return Err(Error::param("mu", mu, "must be finite"));
@@ -36,14 +36,14 @@ impl LogNormal {
         }
         let s2 = sigma * sigma;
         let mean = (mu + 0.5 * s2).exp();
-        if !(mean.is_finite() && mean > 0.0) {
+        let variance = s2.exp_m1() * (2.0 * mu + s2).exp();
+        if !(mean > 0.0 && variance > 0.0 && variance.is_finite()) {
             return Err(Error::param(
                 "mu",
                 mu,
-                format!("the mean exp(mu + sigma^2/2) is not a positive f64 (sigma = {sigma})"),
+                format!("with sigma = {sigma} the mean or variance does not fit in a positive f64"),
             ));
         }
-        let variance = s2.exp_m1() * (2.0 * mu + s2).exp();
         Ok(LogNormal {
             mu,
             sigma,
@@ -67,8 +67,7 @@ impl LogNormal {
         self.mean
     }
 
-    /// Exact variance `expm1(sigma^2) exp(2 mu + sigma^2)`; always finite mathematically
-    /// (`Some(inf)` only if it overflows f64).
+    /// Exact variance `expm1(sigma^2) exp(2 mu + sigma^2)`; always finite.
     pub fn variance(&self) -> Option<f64> {
         Some(self.variance)
     }
@@ -122,18 +121,24 @@ impl LogNormal {
         let l1 = ln_norm_cdf(d - s);
         let l2 = ln_norm_cdf(d - 2.0 * s);
         let mean = (mu + 0.5 * s * s + l1 - l0).exp();
-        let variance = if d >= 0.0 {
-            // Var = m^2 (E[S^2] / m^2 - 1): no cancellation when the cut is above the median.
-            mean * mean * (s * s + l2 + l0 - 2.0 * l1).exp_m1()
-        } else {
+        // Var = m^2 (E[S^2] / m^2 - 1): no cancellation when the cut is above the median.
+        let mut variance = mean * (mean * (s * s + l2 + l0 - 2.0 * l1).exp_m1());
+        if d < 0.0 {
             // Below the median the log-space terms are large and nearly cancel; the plain
             // difference loses only ~log10((d / sigma)^2) digits.
-            (2.0 * mu + 2.0 * s * s + l2 - l0).exp() - mean * mean
-        };
+            let diff = (2.0 * mu + 2.0 * s * s + l2 - l0).exp() - mean * mean;
+            if diff.is_finite() {
+                variance = diff;
+            }
+        }
         TruncatedMoments {
             probability: norm_cdf(d),
             mean,
-            variance: variance.max(0.0),
+            variance: if variance.is_nan() {
+                f64::INFINITY
+            } else {
+                variance.max(0.0)
+            },
         }
     }
 
@@ -167,9 +172,11 @@ mod tests {
         let d = LogNormal::new(-0.3, 1.5).unwrap();
         let oracle = statrs::distribution::LogNormal::new(-0.3, 1.5).unwrap();
         for x in [1e-6, 0.01, 0.5, 1.0, 3.0, 100.0, 1e5] {
-            assert!((d.cdf(x) - oracle.cdf(x)).abs() < 1e-15, "x={x}");
+            // statrs 0.19.1's erfc is good to ~1e-10 relative (see `special`).
+            let (a, b) = (d.cdf(x), oracle.cdf(x));
+            assert!(((a - b) / b).abs() < 1e-9, "x={x} {a} {b}");
             let (a, b) = (d.sf(x), oracle.sf(x));
-            assert!(((a - b) / b).abs() < 1e-13, "x={x} {a} {b}");
+            assert!(((a - b) / b).abs() < 1e-9, "x={x} {a} {b}");
         }
         assert_eq!((d.cdf(0.0), d.sf(0.0), d.cdf(-1.0)), (0.0, 1.0, 0.0));
         assert_eq!((d.cdf(f64::INFINITY), d.sf(f64::INFINITY)), (1.0, 0.0));
@@ -196,6 +203,9 @@ mod tests {
         let e = LogNormal::new(f64::INFINITY, 1.0).unwrap_err().to_string();
         assert!(e.contains("mu") && e.contains("inf"), "{e}");
         let e = LogNormal::new(700.0, 3.0).unwrap_err().to_string();
-        assert!(e.contains("mu") && e.contains("700"), "{e}");
+        assert!(
+            e.contains("mu") && e.contains("700") && e.contains("sigma = 3"),
+            "{e}"
+        );
     }
 }

@@ -14,7 +14,8 @@ use crate::error::{Error, Result};
 ///
 /// Weights are normalised: any finite, non-negative weights with a positive finite sum are
 /// accepted and divided by their sum (so `[9, 1]` means 90% / 10%; `Display` shows the
-/// normalised values). Zero-weight components are dropped, and nested mixtures are flattened
+/// normalised values). Weights that already sum to 1 within 1e-14 are kept exactly as written,
+/// so that `0.45, 0.54955, 0.00045` stays readable. Zero-weight components are dropped, and nested mixtures are flattened
 /// into their parent, so every stored component is a single law.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Mixture {
@@ -54,9 +55,10 @@ impl Mixture {
                 "the weights must have a positive, finite sum",
             ));
         }
+        let norm = if (sum - 1.0).abs() <= 1e-14 { 1.0 } else { sum };
         let mut flat: Vec<(f64, Dist)> = Vec::with_capacity(components.len());
         for (w, d) in components {
-            let w = w / sum;
+            let w = w / norm;
             if w == 0.0 {
                 continue;
             }

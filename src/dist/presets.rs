@@ -11,9 +11,9 @@
 //! |---------------------|----------------------------------------------------------------------|------|----------|
 //! | `diffuse`           | lognormal(mu = -0.125, sigma = 0.5)                                  | 1    | 0.284025 |
 //! | `glossy`            | lognormal(mu = -1.125, sigma = 1.5)                                  | 1    | 8.48774  |
-//! | `caustic`           | 0.45 point(0) + 0.54955 lognormal(mu = -1.98521, sigma = 0.75) + 0.00045 point(2000) | 1 | 1798.03 |
-//! | `mirror-lit`        | 0.99 point(0) + 0.01 truncated-pareto(scale = 19.8053, shape = 1.2, upper = 10^4 scale) | 1 | 4094.17 |
-//! | `firefly`           | 0.99999 lognormal(mu = -0.616541, sigma = 1) + 0.00001 pareto(scale = 1000, shape = 1.1) | 1 | infinite |
+//! | `caustic`           | 0.45 point(0) + 0.54955 lognormal(mu = -1.98518, sigma = 0.75) + 0.00045 point(2000) | 1 | 1799.03 |
+//! | `mirror-lit`        | 0.99 point(0) + 0.01 truncated-pareto(scale = 19.8053, shape = 1.2, upper = 10^4 scale) | 1 | 9318.41 |
+//! | `firefly`           | 0.99999 lognormal(mu = -0.616524, sigma = 1) + 0.00001 pareto(scale = 1000, shape = 1.1) | 1 | infinite |
 //! | `black-speckle`     | 0.9 point(0) + 0.1 lognormal(mu = ln 10 - 0.125, sigma = 0.5)        | 1    | 11.8403  |
 //! | `infinite-variance` | pareto(scale = 1/3, shape = 1.5)                                     | 1    | infinite |
 
@@ -40,16 +40,16 @@ pub enum Preset {
     /// carries 10% of the mean, and with probability 4.5e-4 a path hits the light and returns
     /// the one fixed value 2000 (radiance x albedo, 2000x the pixel mean), which carries the
     /// other 90%. `0.45 point(0) + 0.54955 lognormal(mu = ln(0.1 / 0.54955) - 0.28125 =
-    /// -1.98521, sigma = 0.75) + 0.00045 point(2000)`, mean 1, variance 1798.03.
+    /// -1.98518, sigma = 0.75) + 0.00045 point(2000)`, mean 1, variance 1799.03.
     Caustic,
     /// A pixel lit only through a mirror: 99% of paths find nothing, the rest follow a genuine
     /// power law (Hill shape 1.2) cut off at the light's maximum, 10^4 times the smallest hit.
     /// `0.99 point(0) + 0.01 truncated-pareto(scale = 19.8053, shape = 1.2, upper = 198053)`
-    /// with the scale solved for mean 1; variance 4094.17.
+    /// with the scale solved for mean 1; variance 9318.41.
     MirrorLit,
     /// An ordinary pixel with rare, extreme fireflies: a lognormal body and a 1e-5 Pareto tail
     /// of shape 1.1 starting at 1000 that carries 11% of the mean. `0.99999 lognormal(mu =
-    /// ln(0.89 / 0.99999) - 0.5 = -0.616541, sigma = 1) + 0.00001 pareto(scale = 1000,
+    /// ln(0.89 / 0.99999) - 0.5 = -0.616524, sigma = 1) + 0.00001 pareto(scale = 1000,
     /// shape = 1.1)`, mean 1, variance infinite.
     Firefly,
     /// A mostly occluded pixel (shadow edge, foliage): 90% black, the rest a lognormal of mean
@@ -99,8 +99,9 @@ impl Preset {
             Preset::Diffuse => LogNormal::new(-0.125, 0.5)?.into(),
             Preset::Glossy => LogNormal::new(-1.125, 1.5)?.into(),
             Preset::Caustic => {
-                let (w_zero, w_spike, spike): (f64, f64, f64) = (0.45, 0.00045, 2000.0);
-                let w_body = 1.0 - w_zero - w_spike;
+                // The three weights sum to 1 within rounding, so they are stored as written.
+                let (w_zero, w_body, w_spike, spike): (f64, f64, f64, f64) =
+                    (0.45, 0.54955, 0.00045, 2000.0);
                 let sigma = 0.75;
                 let body_mean = (1.0 - w_spike * spike) / w_body;
                 let mu = body_mean.ln() - 0.5 * sigma * sigma;
@@ -201,8 +202,8 @@ mod tests {
         let close = |a: f64, b: f64| ((a - b) / b).abs() < 5e-6;
         assert!(close(var(Preset::Diffuse).unwrap(), 0.284025));
         assert!(close(var(Preset::Glossy).unwrap(), 8.48774));
-        assert!(close(var(Preset::Caustic).unwrap(), 1798.03));
-        assert!(close(var(Preset::MirrorLit).unwrap(), 4094.17));
+        assert!(close(var(Preset::Caustic).unwrap(), 1799.03));
+        assert!(close(var(Preset::MirrorLit).unwrap(), 9318.41));
         assert!(close(var(Preset::BlackSpeckle).unwrap(), 11.8403));
         assert_eq!(var(Preset::Firefly), None);
         assert_eq!(var(Preset::InfiniteVariance), None);
@@ -221,7 +222,7 @@ mod tests {
             panic!()
         };
         assert!(
-            close(body.mu(), -1.98521)
+            close(body.mu(), -1.98518)
                 && m.components()[2] == Dist::from(PointMass::new(2000.0).unwrap())
         );
         let Dist::Mixture(m) = Preset::Firefly.dist() else {
@@ -230,7 +231,7 @@ mod tests {
         let Dist::LogNormal(body) = m.components()[0] else {
             panic!()
         };
-        assert!(close(body.mu(), -0.616541));
+        assert!(close(body.mu(), -0.616524));
     }
 
     #[test]

@@ -14,6 +14,7 @@ mod jung;
 mod mean;
 mod mon;
 mod numeric;
+mod pajot;
 mod spec;
 pub mod zirr;
 
@@ -23,6 +24,7 @@ pub use jung::Jung;
 pub use mean::Mean;
 pub use mon::{GiniDiagnostic, Gmon, GmonB, Mon, Partition, gini};
 pub use numeric::{Neumaier, Welford};
+pub use pajot::{PajotAdr, PajotHybrid, PajotMode, PajotRot, adr_bandwidths};
 pub use spec::{CascadeSize, EstimatorSpec, ZirrParams};
 pub use zirr::{Zirr, ZirrRef};
 

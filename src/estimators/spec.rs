@@ -178,13 +178,10 @@ impl EstimatorSpec {
             EstimatorSpec::Zirr(p) => Box::new(Zirr::new(p)?),
             EstimatorSpec::ZirrRef(p) => Box::new(ZirrRef::new(p)?),
             // PAJOT-ARMS: wired by the Pajot module.
-            EstimatorSpec::PajotRot { .. }
-            | EstimatorSpec::PajotAdr { .. }
-            | EstimatorSpec::PajotHybrid { .. } => {
-                return Err(Error::UnknownEstimator {
-                    name: self.name().to_string(),
-                    valid: "pajot estimators are not in this build".into(),
-                });
+            EstimatorSpec::PajotRot { learn } => Box::new(super::PajotRot::new(learn)?),
+            EstimatorSpec::PajotAdr { learn } => Box::new(super::PajotAdr::new(learn)?),
+            EstimatorSpec::PajotHybrid { learn, t, delta } => {
+                Box::new(super::PajotHybrid::new(learn, t, delta)?)
             }
         })
     }

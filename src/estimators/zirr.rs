@@ -1,42 +1,895 @@
-//! Zirr et al. cascade reweighting — placeholder replaced by the Zirr module's author.
-use super::{Estimator, EstimatorSpec, ZirrParams};
+//! Zirr et al.'s cascade reweighting of firefly samples (spec §5 and §5a).
+//!
+//! Source: T. Zirr, J. Hanika, C. Dachsbacher, "Re-Weighting Firefly Samples for Improved
+//! Finite-Sample Monte Carlo Estimates", Computer Graphics Forum 37(6), 2018 (\[Z\]).
+//!
+//! # The method
+//!
+//! Each sample is splatted into a cascade of `J` buffers whose reference brightnesses grow
+//! geometrically, `c_j = u·b^j` (\[Z\] §4.2, eqs. 15–16: a sample between two reference
+//! brightnesses is split between the two buffers so that each part counts exactly one sample
+//! there). Buffer `j` holds `B_j = A_j / N`; the buffers sum to the plain mean. From the
+//! buffers the method estimates, per buffer, how many samples it saw (`n_j`, eq. 19, from the
+//! three neighbouring buffers, eqs. 17–18) and composes the buffers from dark to bright, giving
+//! each buffer a weight `w_j ∈ [0, 1]` that shrinks when its energy is carried by too few samples
+//! to be trusted relative to the brightness composed so far (eqs. 12–13, §4.3). Buffers whose
+//! rejection count `ρ_j` (the count itself, or its mean over a 3×3 pixel neighbourhood, §5.3.1)
+//! is at most `κ_min` are dropped as lone fireflies.
+//!
+//! Two variants:
+//!
+//! * [`Zirr`] — the paper's method, `zirr` (spec §5).
+//! * [`ZirrRef`] — the authors' released code (public repository `tszirr/ic.js`, folder `rw/`),
+//!   `zirr-ref` (spec §5a): the top buffer clamps the energy it receives at its reference
+//!   brightness (the excess is reported as the extra `discarded`), the weight averages a count
+//!   term and a colour term, and the neighbourhood is always divided by 9 with clamp-to-edge.
+//!
+//! # Decisions (spec §5, §5a)
+//!
+//! * **Unit rule.** Wherever \[Z\] writes `b^j` this module uses `c_j = u·p_j`, with
+//!   `p_0 = 1, p_j = p_{j−1}·b` (repeated multiplication, never `powi`). Scaling the samples and
+//!   `u` together scales the estimate.
+//! * **Cascade size.** `J = auto` (the `zirr` default) grows the pixel's cascade on demand so
+//!   that a sample with `p_j ≤ s < p_{j+1}` always has buffers `0..=j+1` (\[Z\] eq. 14, and the
+//!   "more buffers" remedy of §5.1); `J_used = 1 + the largest j+1 needed` (at least 1). A fixed
+//!   `J` keeps the literal cascade: a sample above `c_{J−1}` goes wholly to the top buffer, where
+//!   it counts more than one sample and so escapes the lone-firefly test (spec §5, consequence
+//!   (i)); such samples are counted in the extra `over_range`.
+//! * **At-most test.** `x ≼ κ_min` means `x ≤ κ_min + 1e-9·max(1, κ_min)`, because a lone firefly
+//!   counts exactly `κ_min = 1` in real arithmetic and the decision must not depend on rounding.
+//!   Where `n_j ≼ κ_min` the count bound `r_c` is `+inf`. One parameter `kappa_min` serves both
+//!   the count bound and the rejection test.
+//! * **Operation order.** The splat computes `s = S/u`, `ib = 1/b`,
+//!   `a = (p_j/s − ib)/(1 − ib)`, `x = a·S` exactly in the spec's order, so that every discrete
+//!   decision agrees bit for bit with an independent implementation of the spec. The only
+//!   addition is `a = max(a, 0)`: rounding of `p_{j+1} = p_j·b` can make `a` a few ulps negative
+//!   for a sample just below `p_{j+1}`, which would put a tiny negative value into a buffer.
+//! * **Memory.** The thresholds `c_j` are not cached: they are the same for every pixel with
+//!   the same parameters, so caching them per pixel would double the per-pixel state. The splat
+//!   recomputes `p_j` by the same repeated multiplication (one multiply per level above the
+//!   sample's own, so a few per sample), bit-identical to a cached table. The state of one pixel
+//!   is about a hundred bytes plus 16 bytes per buffer ([`Estimator::state_bytes`] reports it).
+//! * **Cascade limit.** A finite sample never needs more than `J_max = j* + 2` buffers, where
+//!   `j*` is the largest `j` with `p_j` finite and `p_j ≤ f64::MAX/u` (about
+//!   `log_b(f64::MAX/u) + 2`). Parameters whose maximum cascade exceeds [`MAX_BUFFERS`] (4096)
+//!   buffers are rejected: with `J = auto` the error names `b` (use a larger `b` or `u`, or a
+//!   fixed `J`), with a fixed `J > 4096` it names `J`.
+//! * **Overflow of `S/u`.** With `u < 1`, a sample above `u·f64::MAX` makes `s = +inf`. With a
+//!   fixed `J` it goes to the top buffer as any over-range sample. With `J = auto` it goes wholly
+//!   to buffer `J_max − 1`, whose reference brightness is `+inf`; it counts 0 there and is always
+//!   rejected. It is counted in `over_range`, which is otherwise 0 for `J = auto`.
+//! * **`zirr-ref` limits.** `J = auto`, `J < 2` and `kappa_min ≠ 1` are errors (the released code
+//!   has a fixed cascade and no separate threshold), and so is a `J` whose top reference
+//!   brightness `c_{J−1}` overflows `f64`, because the top buffer adds `c_{J−1}` per sample.
+//!   A weight that comes out NaN (only possible when `max(E, 0.05u)·N` and `κ·c_j` both overflow)
+//!   counts as 0.
+//!
+//! # Neighbourhood (3×3)
+//!
+//! [`Zirr::block_estimate`] and [`ZirrRef::block_estimate`] take the nine pixels of a 3×3 block
+//! in row-major order (index 4 is the centre; `None` is a pixel outside the image). The centre
+//! must be present and have samples, and every present pixel must have the centre's parameters
+//! (otherwise an error names the offending index). Only the rejection count `ρ_j` uses the
+//! neighbours; buffers, counts, `N` and the weights' other terms are the centre's.
+//!
+//! * `zirr` (\[Z\] §5.3.1, spec §5): `ρ_j` = the mean of `n_j` over the present pixels that have
+//!   samples (the centre included), summed in row-major order. A pixel whose cascade is shorter
+//!   (`J = auto`) has empty buffers beyond it, so its `n_j` there is computed with those buffers
+//!   as zeros — exactly as if its cascade had grown as far as the centre's. (Its `n_j` one
+//!   buffer past its top is therefore `N·B_top/c_top`, not 0; this keeps the estimate
+//!   independent of how far any cascade grew, as spec §5 requires.)
+//! * `zirr-ref` (spec §5a): `ρ_j` = (sum of nine counts, row-major)/9. A missing pixel at offset
+//!   `(dx, dy)` takes the counts of `(dx*, dy*)`, where `dx* = dx` if column `dx` has any present
+//!   pixel and 0 otherwise (rows likewise), or of the centre if `(dx*, dy*)` is missing too
+//!   (this is clamp-to-edge at image borders). A present pixel without samples counts 0.
+
+use super::{CascadeSize, Estimator, EstimatorSpec, Extra, Extras, Neumaier, ZirrParams};
 use crate::error::{Error, Result};
 use std::fmt;
 
-/// Zirr et al.'s method as in the paper (spec §5).
-#[derive(Debug, Clone)]
-pub struct Zirr;
-/// Zirr et al.'s method as in the released code (spec §5a).
-#[derive(Debug, Clone)]
-pub struct ZirrRef;
-impl Zirr {
-    /// Checked constructor.
-    pub fn new(_p: ZirrParams) -> Result<Self> { Err(Error::param("zirr", "", "not built yet")) }
+/// The largest cascade (number of buffers) a parameter set may need; larger ones are rejected.
+pub const MAX_BUFFERS: usize = 4096;
+
+/// Relative tolerance of the at-most test `x ≼ κ_min` (spec §5).
+const AT_MOST_TOLERANCE: f64 = 1e-9;
+
+/// Floor of the running brightness in the released code's colour term, in units of `u`.
+const REF_BRIGHTNESS_FLOOR: f64 = 0.05;
+
+/// Which of the two weightings composes the buffers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Flavor {
+    /// \[Z\] eqs. 12–13 with the at-most rejection test (spec §5).
+    Paper,
+    /// The released shader's averaged count and colour terms (spec §5a).
+    Reference,
 }
-impl ZirrRef {
-    /// Checked constructor.
-    pub fn new(_p: ZirrParams) -> Result<Self> { Err(Error::param("zirr-ref", "", "not built yet")) }
+
+/// Shortest round-trip text of a float, in exponent form when the plain form is long
+/// (`1e300`, not three hundred digits).
+fn fmt_f64(x: f64) -> String {
+    let plain = format!("{x}");
+    if plain.len() > 18 {
+        format!("{x:e}")
+    } else {
+        plain
+    }
 }
-macro_rules! placeholder {
-    ($t:ty) => {
-        impl fmt::Display for $t { fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result { write!(f, "placeholder") } }
-        impl Estimator for $t {
-            fn push(&mut self, _s: f64) {}
-            fn count(&self) -> u64 { 0 }
-            fn estimate(&self) -> Result<f64> { Err(Error::EmptyStream(String::new())) }
-            fn state_bytes(&self) -> usize { 0 }
-            fn spec(&self) -> EstimatorSpec { EstimatorSpec::Mean }
-            fn reset(&mut self) {}
+
+/// The streaming state shared by both variants: `N`, the buffers `A_j` and the parameters.
+#[derive(Debug, Clone)]
+struct Cascade {
+    /// Parameters as given (for `spec()`).
+    params: ZirrParams,
+    /// `ib = 1/b`, computed once exactly as the spec writes it.
+    ib: f64,
+    /// Most buffers this cascade may hold: `J` when fixed, `J_max` (see the module docs) for
+    /// `J = auto`. The top index `limit − 1` takes every sample at or above `p_{limit−1}`.
+    limit: usize,
+    /// `N`: all samples, zeros included.
+    n: u64,
+    /// Samples with `s > p_{limit−1}`.
+    over_range: u64,
+    /// Neumaier accumulators `A_j`; always at least one; `limit` of them when `J` is fixed.
+    a: Vec<Neumaier>,
+}
+
+/// Checks the parameters both variants share and returns the cascade limit.
+fn check_common(p: &ZirrParams) -> Result<usize> {
+    let ZirrParams {
+        b,
+        j,
+        kappa,
+        kappa_min,
+        u,
+    } = *p;
+    if !(b > 1.0 && b.is_finite()) {
+        return Err(Error::param("b", fmt_f64(b), "must be finite and > 1"));
+    }
+    if let CascadeSize::Fixed(j) = j {
+        if j < 1 {
+            return Err(Error::param("J", j, "must be at least 1 (or auto)"));
         }
+        if j > MAX_BUFFERS {
+            return Err(Error::param(
+                "J",
+                j,
+                format!("at most {MAX_BUFFERS} buffers are allowed"),
+            ));
+        }
+    }
+    if !(kappa > 0.0 && kappa.is_finite()) {
+        return Err(Error::param(
+            "kappa",
+            fmt_f64(kappa),
+            "must be finite and > 0",
+        ));
+    }
+    if !(kappa_min >= 0.0 && kappa_min.is_finite()) {
+        return Err(Error::param(
+            "kappa_min",
+            fmt_f64(kappa_min),
+            "must be finite and >= 0",
+        ));
+    }
+    if !(u > 0.0 && u.is_finite()) {
+        return Err(Error::param("u", fmt_f64(u), "must be finite and > 0"));
+    }
+    match j {
+        CascadeSize::Fixed(j) => Ok(j),
+        CascadeSize::Auto => auto_limit(b, u).ok_or_else(|| {
+            Error::param(
+                "b",
+                fmt_f64(b),
+                format!(
+                    "with J = auto and u = {}, the cascade may need more than {MAX_BUFFERS} \
+                     buffers (about log_b(f64::MAX/u) + 2); use a larger b or u, or a fixed J",
+                    fmt_f64(u)
+                ),
+            )
+        }),
+    }
+}
+
+/// `J_max = j* + 2`, `j*` the largest `j` with `p_j` finite and `p_j ≤ f64::MAX/u`; `None` when
+/// that exceeds [`MAX_BUFFERS`]. Requires a valid `b` and `u`.
+fn auto_limit(b: f64, u: f64) -> Option<usize> {
+    let lim = f64::MAX / u;
+    let (mut j, mut p) = (0usize, 1.0f64);
+    loop {
+        let next = p * b;
+        if !(next.is_finite() && next <= lim) {
+            return Some(j + 2);
+        }
+        p = next;
+        j += 1;
+        if j + 2 > MAX_BUFFERS {
+            return None;
+        }
+    }
+}
+
+/// Largest `j` in `0..=last` with `p_j ≤ s` (powers by repeated multiplication), and `p_j`;
+/// `(0, 1)` when there is none (`s < 1` or NaN).
+#[inline(always)]
+fn locate(b: f64, last: usize, s: f64) -> (usize, f64) {
+    let (mut j, mut p) = (0usize, 1.0f64);
+    while j < last {
+        let next = p * b;
+        if next <= s {
+            (p, j) = (next, j + 1);
+        } else {
+            break;
+        }
+    }
+    (j, p)
+}
+
+/// Makes sure buffers `0..len` exist (only ever grows with `J = auto`).
+#[inline(always)]
+fn grow(buf: &mut Vec<Neumaier>, len: usize) {
+    if buf.len() < len {
+        grow_to(buf, len);
+    }
+}
+
+#[cold]
+#[inline(never)]
+fn grow_to(buf: &mut Vec<Neumaier>, len: usize) {
+    buf.reserve_exact(len - buf.len());
+    buf.resize(len, Neumaier::new());
+}
+
+impl Cascade {
+    fn new(params: ZirrParams, limit: usize) -> Self {
+        let len = match params.j {
+            CascadeSize::Fixed(j) => j,
+            CascadeSize::Auto => 1,
+        };
+        Cascade {
+            params,
+            ib: 1.0 / params.b,
+            limit,
+            n: 0,
+            over_range: 0,
+            a: vec![Neumaier::new(); len],
+        }
+    }
+
+    /// Pushes a block of samples (spec §5 "Splat", \[Z\] eqs. 15–16). For a sample at or above
+    /// the top buffer's reference brightness, `top(S, c_{limit−1})` returns what the variant adds
+    /// to the top buffer.
+    ///
+    /// Hot loop: `A_0` and `A_1`, which take nearly every sample, live in registers for the
+    /// whole block (each accumulator still sees the same additions in the same order, so the
+    /// result is bit-identical to pushing one sample at a time), and `s = S/u` is not divided
+    /// when `u = 1` (`S/1 = S` exactly).
+    #[inline(always)]
+    fn push_block(&mut self, samples: &[f64], mut top: impl FnMut(f64, f64) -> f64) {
+        if self.params.u == 1.0 {
+            self.push_block_with::<true>(samples, &mut top);
+        } else {
+            self.push_block_with::<false>(samples, &mut top);
+        }
+    }
+
+    #[inline(always)]
+    fn push_block_with<const UNIT: bool>(
+        &mut self,
+        samples: &[f64],
+        top: &mut impl FnMut(f64, f64) -> f64,
+    ) {
+        let (b, u, ib, limit) = (self.params.b, self.params.u, self.ib, self.limit);
+        let mut over_range = self.over_range;
+        let buf = &mut self.a;
+        let mut a0 = buf[0];
+        let mut a1 = buf.get(1).copied().unwrap_or_default();
+        let mut rest_of = samples.iter();
+        'block: loop {
+            // Runs of samples below u only touch A_0: keep that loop tight.
+            let (x, s) = loop {
+                let Some(&x) = rest_of.next() else {
+                    break 'block;
+                };
+                let s = if UNIT { x } else { x / u };
+                if s < 1.0 {
+                    a0.add(x);
+                } else {
+                    break (x, s);
+                }
+            };
+            let (j, p) = locate(b, limit - 1, s);
+            if j + 1 == limit {
+                // p = +inf only when s = S/u overflowed (see the module docs).
+                if s > p || p == f64::INFINITY {
+                    over_range += 1;
+                }
+                grow(buf, limit);
+                let v = top(x, u * p);
+                match j {
+                    0 => a0.add(v),
+                    1 => a1.add(v),
+                    _ => buf[j].add(v),
+                }
+                continue;
+            }
+            let a = ((p / s - ib) / (1.0 - ib)).max(0.0);
+            let part = a * x;
+            let rest = x - part;
+            grow(buf, j + 2);
+            match j {
+                0 => {
+                    a0.add(part);
+                    a1.add(rest);
+                }
+                1 => {
+                    a1.add(part);
+                    buf[2].add(rest);
+                }
+                _ => {
+                    buf[j].add(part);
+                    buf[j + 1].add(rest);
+                }
+            }
+        }
+        buf[0] = a0;
+        if let Some(slot) = buf.get_mut(1) {
+            *slot = a1;
+        }
+        self.over_range = over_range;
+        self.n += samples.len() as u64;
+    }
+
+    /// Calls `f(j, B_j, n_j, c_j)` for `j` in `0..len` (spec §5 "Buffers", "Counts", eq. 19),
+    /// with `n_j = N·(B_{j−1}/c_{j−1} + B_j/c_j + B_{j+1}/c_{j+1})` summed left to right and
+    /// terms past the cascade limit omitted. Buffers not grown yet (`J = auto`) are zeros.
+    /// Requires `N > 0` and `len ≤ limit`.
+    #[inline]
+    fn for_each_row(&self, len: usize, mut f: impl FnMut(usize, f64, f64, f64)) {
+        let nf = self.n as f64;
+        let (b, u) = (self.params.b, self.params.u);
+        let buffer = |j: usize| match self.a.get(j) {
+            Some(acc) => acc.value() / nf,
+            None => 0.0,
+        };
+        let mut p = 1.0f64;
+        let mut c = u * p;
+        let mut bj = buffer(0);
+        let mut q = bj / c;
+        let mut q_prev = 0.0f64;
+        for j in 0..len {
+            let p_next = p * b;
+            let c_next = u * p_next;
+            let b_next = buffer(j + 1);
+            let q_next = b_next / c_next;
+            let mut sum = if j > 0 { q_prev + q } else { q };
+            if j + 1 < self.limit {
+                sum += q_next;
+            }
+            f(j, bj, nf * sum, c);
+            q_prev = q;
+            (p, c, bj, q) = (p_next, c_next, b_next, q_next);
+        }
+    }
+
+    /// The counts `n_j`, `j` in `0..len` (all 0 without samples).
+    fn counts(&self, len: usize) -> Vec<f64> {
+        let mut out = vec![0.0; len];
+        if self.n > 0 {
+            self.for_each_row(len, |j, _, n, _| out[j] = n);
+        }
+        out
+    }
+
+    /// Composes the buffers (spec §5 "Compose" or §5a "Weight") with rejection counts
+    /// `rho(j, n_j)`, calling `record(B_j, n_j, ρ_j, w_j)` per buffer; returns the estimate.
+    /// Requires `N > 0`.
+    #[inline]
+    fn compose(
+        &self,
+        flavor: Flavor,
+        rho: impl Fn(usize, f64) -> f64,
+        mut record: impl FnMut(f64, f64, f64, f64),
+    ) -> f64 {
+        let ZirrParams {
+            b,
+            kappa,
+            kappa_min,
+            u,
+            ..
+        } = self.params;
+        let nf = self.n as f64;
+        let mut e = 0.0f64;
+        match flavor {
+            Flavor::Paper => {
+                let bound = kappa_min + AT_MOST_TOLERANCE * kappa_min.max(1.0);
+                self.for_each_row(self.a.len(), |j, bj, nj, cj| {
+                    let r_c = if nj <= bound {
+                        f64::INFINITY
+                    } else {
+                        nf / (nj - kappa_min)
+                    };
+                    let r_v = if e == 0.0 { f64::INFINITY } else { cj / e };
+                    let r = r_c.min(r_v);
+                    let mut w = if r == f64::INFINITY {
+                        0.0
+                    } else {
+                        (nf / (kappa * r)).min(1.0)
+                    };
+                    let rho_j = rho(j, nj);
+                    if rho_j <= bound {
+                        w = 0.0;
+                    }
+                    e += w * bj;
+                    record(bj, nj, rho_j, w);
+                });
+            }
+            Flavor::Reference => {
+                let a = (1.0 / kappa).min(1.0);
+                let colour = (0.4 + 0.6 * b) * (1.0 - a) + a;
+                let floor = REF_BRIGHTNESS_FLOOR * u;
+                self.for_each_row(self.a.len(), |j, bj, nj, cj| {
+                    let rho_j = rho(j, nj);
+                    let r_loc = nj / kappa;
+                    let r_glob = rho_j / kappa;
+                    let mut rel = r_glob - 1.0 / kappa;
+                    if rel >= 0.0 {
+                        rel = r_loc - 1.0 / kappa;
+                    }
+                    let col = e.max(floor) * nf / (kappa * cj) * colour;
+                    // Not f64::clamp, which keeps NaN: a NaN weight counts as 0.
+                    let half = (rel + col) / 2.0;
+                    let w = if half >= 0.0 { half.min(1.0) } else { 0.0 };
+                    e += w * bj;
+                    record(bj, nj, rho_j, w);
+                });
+            }
+        }
+        e
+    }
+
+    /// The estimate and its extras (`J_used`, `over_range`, `B`, `n`, `rho`, `w`), with the
+    /// rejection counts `rho` (one per buffer) or the pixel's own counts when `None`.
+    fn report(&self, flavor: Flavor, rho: Option<&[f64]>) -> (f64, Extras) {
+        let len = self.a.len();
+        let (mut bs, mut ns, mut rhos, mut ws) = (
+            Vec::with_capacity(len),
+            Vec::with_capacity(len),
+            Vec::with_capacity(len),
+            Vec::with_capacity(len),
+        );
+        let estimate = if self.n == 0 {
+            for v in [&mut bs, &mut ns, &mut rhos, &mut ws] {
+                v.resize(len, 0.0);
+            }
+            f64::NAN
+        } else {
+            self.compose(
+                flavor,
+                |j, nj| rho.map_or(nj, |r| r[j]),
+                |bj, nj, rj, wj| {
+                    bs.push(bj);
+                    ns.push(nj);
+                    rhos.push(rj);
+                    ws.push(wj);
+                },
+            )
+        };
+        let extras = vec![
+            ("J_used", Extra::Int(len as u64)),
+            ("over_range", Extra::Int(self.over_range)),
+            ("B", Extra::Floats(bs)),
+            ("n", Extra::Floats(ns)),
+            ("rho", Extra::Floats(rhos)),
+            ("w", Extra::Floats(ws)),
+        ];
+        (estimate, extras)
+    }
+
+    fn state_bytes(&self) -> usize {
+        self.a.capacity() * std::mem::size_of::<Neumaier>()
+    }
+
+    fn reset(&mut self) {
+        if self.params.j == CascadeSize::Auto {
+            self.a.truncate(1);
+        }
+        self.a.fill(Neumaier::new());
+        self.n = 0;
+        self.over_range = 0;
+    }
+
+    fn write_params(&self, f: &mut fmt::Formatter<'_>, with_kappa_min: bool) -> fmt::Result {
+        let p = &self.params;
+        write!(f, "b={},J=", fmt_f64(p.b))?;
+        match p.j {
+            CascadeSize::Auto => write!(f, "auto")?,
+            CascadeSize::Fixed(j) => write!(f, "{j}")?,
+        }
+        write!(f, ",kappa={}", fmt_f64(p.kappa))?;
+        if with_kappa_min && p.kappa_min != 1.0 {
+            write!(f, ",kappa_min={}", fmt_f64(p.kappa_min))?;
+        }
+        if p.u != 1.0 {
+            write!(f, ",u={}", fmt_f64(p.u))?;
+        }
+        Ok(())
+    }
+}
+
+/// Checks a 3×3 block (centre present with samples, equal parameters) and returns the centre.
+fn check_block<'a, T: fmt::Display>(
+    block: &[Option<&'a T>; 9],
+    cascade: impl Fn(&T) -> &Cascade,
+) -> Result<&'a T> {
+    let Some(centre) = block[4] else {
+        return Err(Error::param(
+            "block index",
+            4,
+            "the centre of a 3x3 block must be a pixel inside the image",
+        ));
     };
+    if cascade(centre).n == 0 {
+        return Err(Error::EmptyStream(format!(
+            "{centre} at the centre of a 3x3 block"
+        )));
+    }
+    for (i, px) in block.iter().enumerate() {
+        let Some(px) = px else { continue };
+        if cascade(px).params != cascade(centre).params {
+            return Err(Error::param(
+                "block index",
+                i,
+                format!(
+                    "pixel {i} is {px} but the centre is {centre}; all pixels of a block \
+                     must share b, J, kappa, kappa_min and u"
+                ),
+            ));
+        }
+    }
+    Ok(centre)
 }
-placeholder!(Zirr);
-placeholder!(ZirrRef);
+
+/// Zirr et al.'s cascade reweighting as in the paper (spec §5, spec string `zirr`).
+///
+/// Extras, in order: `J_used`, `over_range`, `B`, `n`, `rho`, `w` (see the module docs).
+#[derive(Debug, Clone)]
+pub struct Zirr {
+    c: Cascade,
+}
+
 impl Zirr {
-    /// Placeholder.
-    pub fn block_estimate(_b: &[Option<&Self>; 9]) -> Result<(f64, super::Extras)> { Err(Error::EmptyStream(String::new())) }
+    /// Checked constructor: `b > 1`, `kappa > 0`, `kappa_min ≥ 0`, `u > 0`, all finite;
+    /// `J = auto` or a fixed `J` in `1..=4096`; with `J = auto` the cascade limit
+    /// `log_b(f64::MAX/u) + 2` must be at most [`MAX_BUFFERS`]. Never panics.
+    pub fn new(p: ZirrParams) -> Result<Self> {
+        let limit = check_common(&p)?;
+        Ok(Zirr {
+            c: Cascade::new(p, limit),
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> ZirrParams {
+        self.c.params
+    }
+
+    /// The estimate of the centre pixel of a 3×3 block (row-major, index 4 the centre, `None`
+    /// outside the image), with the rejection counts `ρ_j` averaged over the present pixels
+    /// that have samples (\[Z\] §5.3.1; see the module docs), and the centre's extras with that
+    /// `rho`. Errors when the centre is missing or empty, or when a pixel's parameters differ
+    /// from the centre's (naming its index).
+    pub fn block_estimate(block: &[Option<&Self>; 9]) -> Result<(f64, Extras)> {
+        let centre = &check_block(block, |z: &Zirr| &z.c)?.c;
+        let len = centre.a.len();
+        let mut sum = vec![0.0f64; len];
+        let mut pixels = 0usize;
+        for px in block.iter().flatten() {
+            if px.c.n == 0 {
+                continue;
+            }
+            pixels += 1;
+            px.c.for_each_row(len, |j, _, n, _| sum[j] += n);
+        }
+        let rho: Vec<f64> = sum.iter().map(|s| s / pixels as f64).collect();
+        Ok(centre.report(Flavor::Paper, Some(&rho)))
+    }
 }
+
+impl fmt::Display for Zirr {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Zirr(")?;
+        self.c.write_params(f, true)?;
+        write!(f, ")")
+    }
+}
+
+impl Estimator for Zirr {
+    #[inline]
+    fn push(&mut self, sample: f64) {
+        self.push_slice(std::slice::from_ref(&sample));
+    }
+
+    fn push_slice(&mut self, samples: &[f64]) {
+        self.c.push_block(samples, |x, _| x);
+    }
+
+    fn count(&self) -> u64 {
+        self.c.n
+    }
+
+    fn estimate(&self) -> Result<f64> {
+        if self.c.n == 0 {
+            return Err(super::empty(self));
+        }
+        Ok(self.c.compose(Flavor::Paper, |_, n| n, |_, _, _, _| {}))
+    }
+
+    fn extras(&self) -> Extras {
+        self.c.report(Flavor::Paper, None).1
+    }
+
+    fn state_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + self.c.state_bytes()
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        EstimatorSpec::Zirr(self.c.params)
+    }
+
+    fn reset(&mut self) {
+        self.c.reset();
+    }
+}
+
+/// Zirr et al.'s method as in the authors' released code (spec §5a, spec string `zirr-ref`).
+///
+/// Extras, in order: `J_used`, `over_range`, `B`, `n`, `rho`, `w`, and `discarded`: the energy
+/// above `c_{J−1}` dropped at the top buffer, `Σ (S − c_{J−1}) / N` over the samples with
+/// `S/u ≥ p_{J−1}` — a per-sample mean like `B`, so `Σ B_j + discarded` is the plain mean.
+#[derive(Debug, Clone)]
+pub struct ZirrRef {
+    c: Cascade,
+    discarded: Neumaier,
+}
+
 impl ZirrRef {
-    /// Placeholder.
-    pub fn block_estimate(_b: &[Option<&Self>; 9]) -> Result<(f64, super::Extras)> { Err(Error::EmptyStream(String::new())) }
+    /// Checked constructor: as [`Zirr::new`], and moreover `J` fixed and at least 2,
+    /// `kappa_min = 1`, and `u·b^(J−1)` finite. Never panics.
+    pub fn new(p: ZirrParams) -> Result<Self> {
+        let limit = check_common(&p)?;
+        let CascadeSize::Fixed(j) = p.j else {
+            return Err(Error::param(
+                "J",
+                "auto",
+                "zirr-ref needs a fixed integer J (the released code's cascade is fixed)",
+            ));
+        };
+        if j < 2 {
+            return Err(Error::param("J", j, "must be at least 2 for zirr-ref"));
+        }
+        if p.kappa_min != 1.0 {
+            return Err(Error::param(
+                "kappa_min",
+                fmt_f64(p.kappa_min),
+                "must be 1 for zirr-ref (the released code has no separate threshold)",
+            ));
+        }
+        let mut top = 1.0f64;
+        for _ in 1..j {
+            top *= p.b;
+        }
+        if !(p.u * top).is_finite() {
+            return Err(Error::param(
+                "J",
+                j,
+                format!(
+                    "the top buffer's reference brightness u*b^(J-1) overflows f64 with b = {} \
+                     and u = {}",
+                    fmt_f64(p.b),
+                    fmt_f64(p.u)
+                ),
+            ));
+        }
+        Ok(ZirrRef {
+            c: Cascade::new(p, limit),
+            discarded: Neumaier::new(),
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> ZirrParams {
+        self.c.params
+    }
+
+    /// The estimate of the centre pixel of a 3×3 block as the released shader computes it:
+    /// `ρ_j` = the sum of nine counts over 9, with clamp-to-edge substitution for missing
+    /// pixels and 0 for present pixels without samples (spec §5a; see the module docs).
+    /// Errors as [`Zirr::block_estimate`].
+    pub fn block_estimate(block: &[Option<&Self>; 9]) -> Result<(f64, Extras)> {
+        let centre = check_block(block, |z: &ZirrRef| &z.c)?;
+        let len = centre.c.a.len();
+        let present = block.map(|px| px.is_some());
+        let column = |dx: usize| present[dx] || present[3 + dx] || present[6 + dx];
+        let row = |dy: usize| present[3 * dy] || present[3 * dy + 1] || present[3 * dy + 2];
+        let counts: [Option<Vec<f64>>; 9] = block.map(|px| px.map(|z| z.c.counts(len)));
+        let mut sum = vec![0.0f64; len];
+        for k in 0..9 {
+            let source = if present[k] {
+                k
+            } else {
+                let (dx, dy) = (k % 3, k / 3);
+                let dx = if column(dx) { dx } else { 1 };
+                let dy = if row(dy) { dy } else { 1 };
+                let s = 3 * dy + dx;
+                if present[s] { s } else { 4 }
+            };
+            if let Some(n) = &counts[source] {
+                for (acc, v) in sum.iter_mut().zip(n) {
+                    *acc += v;
+                }
+            }
+        }
+        let rho: Vec<f64> = sum.iter().map(|s| s / 9.0).collect();
+        let (estimate, mut extras) = centre.c.report(Flavor::Reference, Some(&rho));
+        extras.push(("discarded", Extra::Float(centre.discarded_mean())));
+        Ok((estimate, extras))
+    }
+
+    /// The discarded energy as a per-sample mean (0 without samples).
+    fn discarded_mean(&self) -> f64 {
+        if self.c.n == 0 {
+            0.0
+        } else {
+            self.discarded.value() / self.c.n as f64
+        }
+    }
+}
+
+impl fmt::Display for ZirrRef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Zirr-ref(")?;
+        self.c.write_params(f, false)?;
+        write!(f, ")")
+    }
+}
+
+impl Estimator for ZirrRef {
+    #[inline]
+    fn push(&mut self, sample: f64) {
+        self.push_slice(std::slice::from_ref(&sample));
+    }
+
+    fn push_slice(&mut self, samples: &[f64]) {
+        let discarded = &mut self.discarded;
+        self.c.push_block(samples, |x, c| {
+            discarded.add(x - c);
+            c
+        });
+    }
+
+    fn count(&self) -> u64 {
+        self.c.n
+    }
+
+    fn estimate(&self) -> Result<f64> {
+        if self.c.n == 0 {
+            return Err(super::empty(self));
+        }
+        Ok(self.c.compose(Flavor::Reference, |_, n| n, |_, _, _, _| {}))
+    }
+
+    fn extras(&self) -> Extras {
+        let mut extras = self.c.report(Flavor::Reference, None).1;
+        extras.push(("discarded", Extra::Float(self.discarded_mean())));
+        extras
+    }
+
+    fn state_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + self.c.state_bytes()
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        EstimatorSpec::ZirrRef(self.c.params)
+    }
+
+    fn reset(&mut self) {
+        self.c.reset();
+        self.discarded = Neumaier::new();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const RUNNING: [f64; 7] = [0.6, 1.5, 0.0, 2.2, 4.8, 350.0, 4.1];
+
+    fn fixed(j: usize) -> ZirrParams {
+        ZirrParams {
+            j: CascadeSize::Fixed(j),
+            ..ZirrParams::PAPER
+        }
+    }
+
+    fn floats(extras: &Extras, key: &str) -> Vec<f64> {
+        match extras.iter().find(|(k, _)| *k == key) {
+            Some((_, Extra::Floats(v))) => v.clone(),
+            other => panic!("no Floats extra {key}: {other:?}"),
+        }
+    }
+
+    fn close(a: f64, b: f64, rel: f64) -> bool {
+        (a - b).abs() <= rel * a.abs().max(b.abs()) || a == b
+    }
+
+    #[test]
+    fn locate_finds_the_largest_power_below() {
+        assert_eq!(locate(8.0, 5, 1.0), (0, 1.0));
+        assert_eq!(locate(8.0, 5, 7.999), (0, 1.0));
+        assert_eq!(locate(8.0, 5, 8.0), (1, 8.0));
+        assert_eq!(locate(8.0, 5, 350.0), (2, 64.0));
+        assert_eq!(locate(8.0, 5, 1e9), (5, 32768.0));
+        assert_eq!(locate(8.0, 5, f64::INFINITY), (5, 32768.0));
+        assert_eq!(locate(8.0, 0, 1e9), (0, 1.0));
+    }
+
+    #[test]
+    fn auto_limit_counts_finite_powers() {
+        // 8^341 ≈ 4.0e307 is the largest finite power of 8 below f64::MAX.
+        assert_eq!(auto_limit(8.0, 1.0), Some(343));
+        assert_eq!(auto_limit(2.0, 1.0), Some(1025));
+        // u = f64::MAX: only p_0 = 1 fits, so buffers 0 and 1.
+        assert_eq!(auto_limit(8.0, f64::MAX), Some(2));
+        assert_eq!(auto_limit(1.01, 1.0), None);
+    }
+
+    #[test]
+    fn running_example_buffers_counts_and_estimate() {
+        let mut z = Zirr::new(fixed(6)).unwrap();
+        z.push_slice(&RUNNING);
+        let e = z.extras();
+        let a: Vec<f64> = floats(&e, "B").iter().map(|b| b * 7.0).collect();
+        let want_a = [3.371429, 9.828571, 23.142857, 326.857143, 0.0, 0.0];
+        for (x, w) in a.iter().zip(want_a) {
+            assert!((x - w).abs() < 1e-6, "{a:?}");
+        }
+        let n = floats(&e, "n");
+        let want_n = [4.6, 4.961607, 2.228571, 1.0, 0.638393, 0.0];
+        for (x, w) in n.iter().zip(want_n) {
+            assert!((x - w).abs() < 1e-6, "{n:?}");
+        }
+        assert!(close(z.estimate().unwrap(), 5.191836734693878, 1e-12));
+    }
+
+    #[test]
+    fn reference_example() {
+        let mut z = ZirrRef::new(ZirrParams::REFERENCE).unwrap();
+        z.push_slice(&RUNNING);
+        assert!(close(z.estimate().unwrap(), 5.616560523284569, 1e-12));
+    }
+
+    #[test]
+    fn push_and_push_slice_agree_bit_for_bit() {
+        let xs = [0.3, 9.0, 1e6, 0.0, 2.5, 64.0, 1e-3, 7e4];
+        for p in [ZirrParams::PAPER, fixed(3), fixed(1)] {
+            let (mut a, mut b) = (Zirr::new(p).unwrap(), Zirr::new(p).unwrap());
+            a.push_slice(&xs);
+            xs.iter().for_each(|&x| b.push(x));
+            assert_eq!(a.extras(), b.extras());
+        }
+    }
+
+    #[test]
+    fn reset_forgets_samples_and_keeps_params() {
+        let mut z = Zirr::new(ZirrParams::PAPER).unwrap();
+        z.push_slice(&RUNNING);
+        z.reset();
+        assert_eq!(z.count(), 0);
+        assert!(z.estimate().is_err());
+        z.push_slice(&RUNNING);
+        let mut fresh = Zirr::new(ZirrParams::PAPER).unwrap();
+        fresh.push_slice(&RUNNING);
+        assert_eq!(z.extras(), fresh.extras());
+    }
 }

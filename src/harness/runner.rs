@@ -21,8 +21,8 @@ use std::time::Instant;
 /// Trials per chunk: the unit of work and of deterministic merging.
 pub const CHUNK_TRIALS: u64 = 256;
 
-/// Chunks run in parallel before their results are merged (bounds memory on long runs).
-const WAVE_CHUNKS: u64 = 64;
+/// Chunks per block: run in parallel, then merged (bounds memory on long runs).
+pub const BLOCK_CHUNKS: u64 = 64;
 
 /// How to run an experiment.
 #[derive(Debug, Clone, Default)]
@@ -207,7 +207,7 @@ fn run_distribution(
     let chunks = trials.div_ceil(CHUNK_TRIALS);
     let mut wave_start = 0;
     while wave_start < chunks {
-        let wave_end = (wave_start + WAVE_CHUNKS).min(chunks);
+        let wave_end = (wave_start + BLOCK_CHUNKS).min(chunks);
         let results = (wave_start..wave_end)
             .into_par_iter()
             .map(|c| {
@@ -217,9 +217,13 @@ fn run_distribution(
                 r
             })
             .collect::<Result<Vec<_>>>()?;
+        // A block is folded chunk by chunk, then the total block by block: a fixed merge tree,
+        // so a shard that owns whole blocks can be merged into the same bits.
+        let mut block = ChunkResult::empty(&template, exp.estimators.len());
         for r in &results {
-            total.merge(r);
+            block.merge(r);
         }
+        total.merge(&block);
         wave_start = wave_end;
     }
     Ok(DistResult {

@@ -1,6 +1,7 @@
 //! Reports: tables (CSV, JSON, Markdown) and plots. Analysis writes data; plotting only reads
 //! it. Every file is written atomically, so an interrupted run leaves earlier results intact.
 
+pub mod plots;
 pub mod tables;
 
 use crate::error::{Error, Result};

@@ -1,0 +1,805 @@
+//! Pajot et al.'s outlier delaying by density estimation: [`PajotRot`], [`PajotAdr`] and
+//! [`PajotHybrid`] (spec §6).
+//!
+//! Source: A. Pajot, L. Barthe, M. Paulin, "Sample-Space Bright Spots Removal Using Density
+//! Estimation", Graphics Interface 2011 (**[P]**). Each pixel keeps a one-dimensional density
+//! estimate of its samples' log-luminance, built from Epanechnikov kernels ([P] eq. 3). A sample
+//! whose log lies above the right-most *extended mode* (two or more samples whose kernels chain
+//! together, [P] §3, §4.2) is *delayed*: it is left out of the pixel until the density grows to
+//! reach it, and every delayed sample is re-tested whenever the acceptance bound `m` grows
+//! ([P] Alg. 1). The first `learn` samples only build the initial density ([P] §4.1).
+//!
+//! - **ROT** ([P] §4.4, eq. 5; spec §6.2): every kernel has the rule-of-thumb half-width
+//!   `h = (25 k)^(-1/5) σ` of the `k` log-luminances seen so far. Per-pixel state: the running
+//!   moments, `m` and the delayed list.
+//! - **ADR** ([P] §3.1 eq. 4, §4.2; spec §6.3): adaptive bandwidths (eq. 4) over an approximate
+//!   distribution representation, in which an extended mode is kept as `(min, max, count)`
+//!   ([`PajotMode`]). Per-pixel state: the modes, `m` and the delayed list.
+//! - **Hybrid** ([P] §4.6; spec §6.4): both run side by side; once `T` successive updates of
+//!   the bounds agree within `δ`, the pixel continues with ROT alone and the modes are freed.
+//!
+//! The estimate is the compensated mean of the accepted samples (black samples included).
+//!
+//! # Decisions
+//!
+//! From the spec (each is tested in this module or in `tests/pajot.rs`):
+//! 1. **`≤` acceptance**: a non-black sample is accepted iff `ln S ≤ m` (Alg. 1 has `<`), so
+//!    the sample defining `m` is itself accepted; accepted = zeros ∪ {`ln S ≤ m`} at all times.
+//! 2. **Divisor**: the accepted count, not `n` (a renderer that does not splat a sample adds
+//!    neither its value nor its weight); 0 when nothing is accepted. σ is the population σ.
+//! 3. **Learning**: an estimate read while `n < learn` is computed as if learning ended now,
+//!    leaving the state unchanged.
+//! 4. **No extended mode**: `m = -inf`, every non-black sample is delayed (a value is trusted
+//!    only once a similar one corroborates it): a one-sample pixel estimates 0.
+//! 5. **Half-width**: `h` is read literally as the kernel's half-width; two samples overlap iff
+//!    their logs are equal or closer than `h_a + h_b`. Silverman's unit-variance kernel would
+//!    stretch the support by √5 and accept more.
+//! 6. **ROT is incremental**: only the newcomer's overlaps with `m` and the delayed samples are
+//!    examined; delayed samples are not re-chained among themselves when `h` grows.
+//! 7. **ADR absorbs**: a merge replaces every mode meeting the span of the newcomer and the
+//!    modes it overlaps (modes stay disjoint); the newcomer's bandwidth uses the point set that
+//!    includes it.
+//! 8. **Hybrid**: agreement is `|m_ROT − m_ADR| ≤ δ |m_ADR|` at each *event* (a sample, the one
+//!    ending learning included, after which either bound changed); the bound never decreases at
+//!    the switch (`m_h = max(m_h, m_ADR, m_ROT)` there, `max(m_h, m_ROT)` afterwards); while
+//!    learning, ADR's bound is used.
+//!
+//! Ours, where the spec leaves a choice open:
+//! 9. **Side by side means independent**: inside the hybrid, ROT and ADR evolve exactly as the
+//!    standalone estimators on the same stream (ROT's overlap points are the samples above
+//!    `m_ROT`, whatever `m_h` is). The hybrid's own acceptance depends on `m_h` only. Reason:
+//!    the bounds the switch compares are then those of `pajot-rot` and `pajot-adr`, which makes
+//!    the switch reproducible and testable against them.
+//! 10. **Bounded delayed list** ([`PajotRot::with_max_delayed`] and the same on the others; not
+//!     part of the spec-string grammar): when a new entry would make the list longer than `k`,
+//!     the entry with the **largest** value is discarded for good. It is counted in `dropped`,
+//!     never accepted even if `m` later passes it, and excluded from the estimate like a delayed
+//!     sample; for ROT it also stops being an overlap point. Reason: `m` only grows, so the
+//!     largest delayed sample is the last one that could ever be released; keeping the `k`
+//!     smallest keeps the samples most likely to be accepted and ROT's most useful overlap
+//!     points, and the kept content does not depend on arrival order. Dropping the oldest would
+//!     discard a sample just below `m` as readily as a firefly. `k = 0` drops every delayed
+//!     sample. In the hybrid the list also holds ROT's overlap points that `m_h` has already
+//!     accepted; if such a point is the largest entry it is forgotten as an overlap point only
+//!     (it stays in the estimate and is not counted in `dropped`).
+//! 11. **Memory over speed in the delayed list**: it holds the linear values (8 bytes each),
+//!     sorted ascending; logs are recomputed with `ln` (monotone) when a sample is re-tested,
+//!     which only happens when a sample lands above `m`. The hybrid keeps one list for its
+//!     delayed samples and ROT's overlap points (everything above `min(m_ROT, m_h)`).
+//! 12. **Learning storage**: only non-black samples are stored (black ones are accepted on
+//!     arrival), and the buffer is freed when learning ends.
+//! 13. **Reads during learning**: extras, [`PajotRot::delayed`], bounds and modes are reported
+//!     as if learning ended now, like the estimate.
+//! 14. **After the switch** the hybrid reports `modes_single = modes_extended = 0` (the modes
+//!     are freed) and `m_adr` as ADR's bound at the switch; `switch_index` is the 0-based index
+//!     of the switching sample in the stream and appears once switched.
+//! 15. **Black** means `S == 0.0` (`-0.0` included); inputs are validated at the boundary.
+//! 16. **`learn = 0`**: the post-learning rules apply from the first sample; there is no
+//!     learning-end event.
+//!
+//! # Properties
+//!
+//! Decisions depend on differences of logs only, so ROT and ADR are scale invariant: scaling
+//! every sample by `c > 0` scales the estimate by `c` (up to rounding of `ln`, and of `δ |m|`
+//! in the hybrid when `δ > 0`). Order of arrival after learning matters only through `m`:
+//! whatever the order, the delayed samples are exactly those above the final `m`, and a sample
+//! at or below the bound at the end of learning is never delayed. What moves `m` is
+//! order-dependent: ROT's `h` depends on how many samples have arrived and on their spread
+//! (decision 6), and ADR's bandwidths on the point set when the newcomer arrives.
+//!
+//! # Cost
+//!
+//! ROT: one `ln`, one Welford update (a division on the dependency chain) and a comparison per
+//! sample; a binary search over the delayed list when a sample lands above `m`. ADR: one `ln`
+//! and a binary search over the modes when the sample falls inside an extended mode; otherwise
+//! the eq. 4 bandwidths of *all* represented points, `O(n)` time with transient scratch memory
+//! (not part of the per-pixel state). The hybrid pays both until it switches, then ROT's.
+
+mod adr;
+mod ledger;
+mod rot;
+
+pub use adr::{PajotMode, adr_bandwidths};
+
+use super::{Estimator, EstimatorSpec, Extra, Extras};
+use crate::error::{Error, Result};
+use adr::Adr;
+use ledger::Ledger;
+use rot::Rot;
+use std::borrow::Cow;
+use std::fmt;
+
+
+/// Calls `emit(lo, hi, count)` for each run of consecutive values of the ascending `xs` in
+/// which `linked(i)` holds between `xs[i]` and `xs[i + 1]`.
+fn for_each_run(
+    xs: &[f64],
+    linked: impl Fn(usize) -> bool,
+    mut emit: impl FnMut(f64, f64, u64),
+) {
+    let mut start = 0;
+    for i in 0..xs.len() {
+        if i + 1 == xs.len() || !linked(i) {
+            emit(xs[start], xs[i], (i + 1 - start) as u64);
+            start = i + 1;
+        }
+    }
+}
+
+/// The learning phase's storage: non-black samples in arrival order.
+fn store(buf: &mut Vec<f64>, learn: usize, s: f64) {
+    if buf.capacity() == 0 {
+        buf.reserve_exact(learn.min(1024));
+    }
+    buf.push(s);
+}
+
+/// Ends a learning phase: feeds the stored samples' logs to `rot` in arrival order (if given),
+/// then returns the samples sorted, with their logs.
+fn sorted_with_logs(mut values: Vec<f64>, rot: Option<&mut Rot>) -> (Vec<f64>, Vec<f64>) {
+    if let Some(rot) = rot {
+        for &s in &values {
+            rot.observe(s.ln());
+        }
+    }
+    values.sort_by(f64::total_cmp);
+    let logs = values.iter().map(|s| s.ln()).collect();
+    (values, logs)
+}
+
+/// The `learn` parameter as a sample count.
+fn learn_count(learn: usize) -> u64 {
+    u64::try_from(learn).unwrap_or(u64::MAX)
+}
+
+/// Extras common to the three estimators.
+fn common_extras(ledger: &Ledger, m: f64) -> Extras {
+    let mut x: Extras = vec![
+        ("delayed", Extra::Int(ledger.delayed() as u64)),
+        ("m", Extra::Float(m)),
+    ];
+    if ledger.cap() != usize::MAX {
+        x.push(("dropped", Extra::Int(ledger.dropped())));
+    }
+    x
+}
+
+fn fmt_cap(f: &mut fmt::Formatter<'_>, ledger: &Ledger) -> fmt::Result {
+    if ledger.cap() != usize::MAX {
+        write!(f, ",max_delayed={}", ledger.cap())?;
+    }
+    Ok(())
+}
+
+/// Pajot et al.'s outlier delaying with the rule-of-thumb bandwidth (spec §6.2),
+/// `pajot-rot:learn=50`.
+#[derive(Debug, Clone)]
+pub struct PajotRot {
+    learn: usize,
+    n: u64,
+    learning: Vec<f64>,
+    rot: Rot,
+    ledger: Ledger,
+}
+
+impl PajotRot {
+    /// A ROT estimator learning from the first `learn` samples (any value is valid; `0` skips
+    /// learning). Returns `Result` like every estimator constructor.
+    pub fn new(learn: usize) -> Result<Self> {
+        Ok(PajotRot {
+            learn,
+            n: 0,
+            learning: Vec::new(),
+            rot: Rot::NEW,
+            ledger: Ledger::new(usize::MAX),
+        })
+    }
+
+    /// Bounds the delayed list to `k` samples: when full, the largest delayed sample is dropped
+    /// for good (module doc, decision 10). Not part of the spec-string grammar.
+    pub fn with_max_delayed(mut self, k: usize) -> Self {
+        self.ledger = Ledger::new(k);
+        self.reset();
+        self
+    }
+
+    /// The bound on the delayed list, if any.
+    pub fn max_delayed(&self) -> Option<usize> {
+        Some(self.ledger.cap()).filter(|&k| k != usize::MAX)
+    }
+
+    /// The current eq. 5 half-width `h` over every non-black log seen (0 for at most one).
+    pub fn bandwidth(&self) -> f64 {
+        self.settled().rot.bandwidth()
+    }
+
+    /// The acceptance bound `m` (log units; `-inf` before any extended mode).
+    pub fn bound(&self) -> f64 {
+        self.settled().rot.m
+    }
+
+    /// Number of samples currently delayed.
+    pub fn delayed(&self) -> u64 {
+        self.settled().ledger.delayed() as u64
+    }
+
+    /// Number of delayed samples dropped because the list was full.
+    pub fn dropped(&self) -> u64 {
+        self.settled().ledger.dropped()
+    }
+
+    /// Number of accepted samples, black ones included (the estimate's divisor).
+    pub fn accepted(&self) -> u64 {
+        self.settled().ledger.accepted()
+    }
+
+    fn is_learning(&self) -> bool {
+        self.n < learn_count(self.learn)
+    }
+
+    /// This estimator, or a copy whose learning phase has ended now.
+    fn settled(&self) -> Cow<'_, Self> {
+        if self.is_learning() {
+            let mut copy = self.clone();
+            copy.finish_learning();
+            Cow::Owned(copy)
+        } else {
+            Cow::Borrowed(self)
+        }
+    }
+
+    fn finish_learning(&mut self) {
+        let (values, logs) =
+            sorted_with_logs(std::mem::take(&mut self.learning), Some(&mut self.rot));
+        self.rot.learn_end(&logs);
+        let m = self.rot.m;
+        for (&s, &l) in values.iter().zip(&logs) {
+            self.ledger.place(s, l, m, m);
+        }
+    }
+
+    #[inline(always)]
+    fn push_one(&mut self, s: f64) {
+        self.n += 1;
+        if self.n <= learn_count(self.learn) {
+            if s == 0.0 {
+                self.ledger.zero();
+            } else {
+                store(&mut self.learning, self.learn, s);
+            }
+            if self.n == learn_count(self.learn) {
+                self.finish_learning();
+            }
+            return;
+        }
+        if s == 0.0 {
+            self.ledger.zero();
+            return;
+        }
+        let l = s.ln();
+        self.rot.observe(l);
+        if l <= self.rot.m {
+            self.ledger.accept(s);
+            return;
+        }
+        self.update(s, l);
+    }
+
+    #[inline(never)]
+    fn update(&mut self, s: f64, l: f64) {
+        if self.rot.update(l, self.ledger.kept()) {
+            self.ledger.settle(self.rot.m, self.rot.m);
+        }
+        self.ledger.place(s, l, self.rot.m, self.rot.m);
+    }
+}
+
+impl fmt::Display for PajotRot {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Pajot-ROT(learn={}", self.learn)?;
+        fmt_cap(f, &self.ledger)?;
+        write!(f, ")")
+    }
+}
+
+impl Estimator for PajotRot {
+    fn push(&mut self, sample: f64) {
+        self.push_one(sample);
+    }
+
+    fn push_slice(&mut self, samples: &[f64]) {
+        for &s in samples {
+            self.push_one(s);
+        }
+    }
+
+    fn count(&self) -> u64 {
+        self.n
+    }
+
+    fn estimate(&self) -> Result<f64> {
+        if self.n == 0 {
+            return Err(super::empty(self));
+        }
+        Ok(self.settled().ledger.mean())
+    }
+
+    fn extras(&self) -> Extras {
+        let s = self.settled();
+        common_extras(&s.ledger, s.rot.m)
+    }
+
+    fn state_bytes(&self) -> usize {
+        size_of::<Self>() + self.learning.capacity() * size_of::<f64>() + self.ledger.heap_bytes()
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        EstimatorSpec::PajotRot { learn: self.learn }
+    }
+
+    fn reset(&mut self) {
+        self.n = 0;
+        self.learning.clear();
+        self.rot = Rot::NEW;
+        self.ledger.clear();
+    }
+}
+
+/// Pajot et al.'s outlier delaying with adaptive bandwidths over the approximate distribution
+/// representation (spec §6.3), `pajot-adr:learn=50`.
+#[derive(Debug, Clone)]
+pub struct PajotAdr {
+    learn: usize,
+    n: u64,
+    learning: Vec<f64>,
+    adr: Adr,
+    ledger: Ledger,
+}
+
+impl PajotAdr {
+    /// An ADR estimator learning from the first `learn` samples (any value is valid).
+    pub fn new(learn: usize) -> Result<Self> {
+        Ok(PajotAdr {
+            learn,
+            n: 0,
+            learning: Vec::new(),
+            adr: Adr::NEW,
+            ledger: Ledger::new(usize::MAX),
+        })
+    }
+
+    /// Bounds the delayed list to `k` samples (module doc, decision 10).
+    pub fn with_max_delayed(mut self, k: usize) -> Self {
+        self.ledger = Ledger::new(k);
+        self.reset();
+        self
+    }
+
+    /// The bound on the delayed list, if any.
+    pub fn max_delayed(&self) -> Option<usize> {
+        Some(self.ledger.cap()).filter(|&k| k != usize::MAX)
+    }
+
+    /// The acceptance bound `m`: the top of the last extended mode (`-inf` if none).
+    pub fn bound(&self) -> f64 {
+        self.settled().adr.m
+    }
+
+    /// Number of samples currently delayed.
+    pub fn delayed(&self) -> u64 {
+        self.settled().ledger.delayed() as u64
+    }
+
+    /// Number of delayed samples dropped because the list was full.
+    pub fn dropped(&self) -> u64 {
+        self.settled().ledger.dropped()
+    }
+
+    /// Number of accepted samples, black ones included (the estimate's divisor).
+    pub fn accepted(&self) -> u64 {
+        self.settled().ledger.accepted()
+    }
+
+    /// The modes, ascending.
+    pub fn modes(&self) -> Vec<PajotMode> {
+        self.settled().adr.modes.clone()
+    }
+
+    fn is_learning(&self) -> bool {
+        self.n < learn_count(self.learn)
+    }
+
+    fn settled(&self) -> Cow<'_, Self> {
+        if self.is_learning() {
+            let mut copy = self.clone();
+            copy.finish_learning();
+            Cow::Owned(copy)
+        } else {
+            Cow::Borrowed(self)
+        }
+    }
+
+    fn finish_learning(&mut self) {
+        let (values, logs) = sorted_with_logs(std::mem::take(&mut self.learning), None);
+        self.adr.learn_end(&logs);
+        let m = self.adr.m;
+        for (&s, &l) in values.iter().zip(&logs) {
+            self.ledger.place(s, l, m, m);
+        }
+    }
+
+    #[inline(always)]
+    fn push_one(&mut self, s: f64) {
+        self.n += 1;
+        if self.n <= learn_count(self.learn) {
+            if s == 0.0 {
+                self.ledger.zero();
+            } else {
+                store(&mut self.learning, self.learn, s);
+            }
+            if self.n == learn_count(self.learn) {
+                self.finish_learning();
+            }
+            return;
+        }
+        if s == 0.0 {
+            self.ledger.zero();
+            return;
+        }
+        let l = s.ln();
+        if self.adr.update(l) {
+            self.ledger.settle(self.adr.m, self.adr.m);
+        }
+        if l <= self.adr.m {
+            self.ledger.accept(s);
+        } else {
+            self.ledger.place(s, l, self.adr.m, self.adr.m);
+        }
+    }
+}
+
+impl fmt::Display for PajotAdr {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Pajot-ADR(learn={}", self.learn)?;
+        fmt_cap(f, &self.ledger)?;
+        write!(f, ")")
+    }
+}
+
+impl Estimator for PajotAdr {
+    fn push(&mut self, sample: f64) {
+        self.push_one(sample);
+    }
+
+    fn push_slice(&mut self, samples: &[f64]) {
+        for &s in samples {
+            self.push_one(s);
+        }
+    }
+
+    fn count(&self) -> u64 {
+        self.n
+    }
+
+    fn estimate(&self) -> Result<f64> {
+        if self.n == 0 {
+            return Err(super::empty(self));
+        }
+        Ok(self.settled().ledger.mean())
+    }
+
+    fn extras(&self) -> Extras {
+        let s = self.settled();
+        let mut x = common_extras(&s.ledger, s.adr.m);
+        let (single, extended) = s.adr.mode_counts();
+        x.push(("modes_single", Extra::Int(single)));
+        x.push(("modes_extended", Extra::Int(extended)));
+        x
+    }
+
+    fn state_bytes(&self) -> usize {
+        size_of::<Self>()
+            + self.learning.capacity() * size_of::<f64>()
+            + self.ledger.heap_bytes()
+            + self.adr.heap_bytes()
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        EstimatorSpec::PajotAdr { learn: self.learn }
+    }
+
+    fn reset(&mut self) {
+        self.n = 0;
+        self.learning.clear();
+        self.adr.modes.clear();
+        self.adr.m = f64::NEG_INFINITY;
+        self.ledger.clear();
+    }
+}
+
+/// ADR and ROT side by side, switching to ROT alone once their bounds agree `T` times in a row
+/// within `δ` (spec §6.4), `pajot-hybrid:learn=50,T=2,delta=0`.
+#[derive(Debug, Clone)]
+pub struct PajotHybrid {
+    learn: usize,
+    t: usize,
+    delta: f64,
+    n: u64,
+    learning: Vec<f64>,
+    rot: Rot,
+    /// `None` once switched to ROT alone.
+    adr: Option<Adr>,
+    /// ADR's bound when it was dropped.
+    adr_last: f64,
+    m: f64,
+    streak: usize,
+    switch_index: Option<u64>,
+    ledger: Ledger,
+}
+
+impl PajotHybrid {
+    /// A hybrid estimator: `learn` any integer, `t >= 1` agreeing events before the switch,
+    /// `delta` finite and `>= 0`.
+    pub fn new(learn: usize, t: usize, delta: f64) -> Result<Self> {
+        if t < 1 {
+            return Err(Error::param("T", t, "must be an integer >= 1"));
+        }
+        if !(delta >= 0.0 && delta.is_finite()) {
+            return Err(Error::param("delta", delta, "must be finite and >= 0"));
+        }
+        Ok(PajotHybrid {
+            learn,
+            t,
+            delta,
+            n: 0,
+            learning: Vec::new(),
+            rot: Rot::NEW,
+            adr: Some(Adr::NEW),
+            adr_last: f64::NEG_INFINITY,
+            m: f64::NEG_INFINITY,
+            streak: 0,
+            switch_index: None,
+            ledger: Ledger::new(usize::MAX),
+        })
+    }
+
+    /// Bounds the kept list to `k` samples (module doc, decision 10).
+    pub fn with_max_delayed(mut self, k: usize) -> Self {
+        self.ledger = Ledger::new(k);
+        self.reset();
+        self
+    }
+
+    /// The bound on the kept list, if any.
+    pub fn max_delayed(&self) -> Option<usize> {
+        Some(self.ledger.cap()).filter(|&k| k != usize::MAX)
+    }
+
+    /// The hybrid's acceptance bound `m_h`.
+    pub fn bound(&self) -> f64 {
+        self.settled().m
+    }
+
+    /// ROT's bound `m_ROT` (the same as a standalone [`PajotRot`] on the same stream, without
+    /// a cap on the list).
+    pub fn rot_bound(&self) -> f64 {
+        self.settled().rot.m
+    }
+
+    /// ADR's bound `m_ADR` (the same as a standalone [`PajotAdr`] on the same stream until the
+    /// switch; frozen at the switch).
+    pub fn adr_bound(&self) -> f64 {
+        let s = self.settled();
+        s.adr.as_ref().map_or(s.adr_last, |a| a.m)
+    }
+
+    /// Number of samples currently delayed.
+    pub fn delayed(&self) -> u64 {
+        self.settled().ledger.delayed() as u64
+    }
+
+    /// Number of delayed samples dropped because the list was full.
+    pub fn dropped(&self) -> u64 {
+        self.settled().ledger.dropped()
+    }
+
+    /// Number of accepted samples, black ones included (the estimate's divisor).
+    pub fn accepted(&self) -> u64 {
+        self.settled().ledger.accepted()
+    }
+
+    /// ADR's modes, ascending (empty after the switch).
+    pub fn modes(&self) -> Vec<PajotMode> {
+        self.settled()
+            .adr
+            .as_ref()
+            .map_or_else(Vec::new, |a| a.modes.clone())
+    }
+
+    /// The 0-based index of the sample at which the pixel switched to ROT alone, if it did.
+    pub fn switch_index(&self) -> Option<u64> {
+        self.settled().switch_index
+    }
+
+    fn is_learning(&self) -> bool {
+        self.n < learn_count(self.learn)
+    }
+
+    fn settled(&self) -> Cow<'_, Self> {
+        if self.is_learning() {
+            let mut copy = self.clone();
+            copy.finish_learning(self.n.saturating_sub(1));
+            Cow::Owned(copy)
+        } else {
+            Cow::Borrowed(self)
+        }
+    }
+
+    /// Lower edge of the kept list: ROT needs the samples above `m_ROT`, the estimate the
+    /// ones above `m_h`.
+    fn floor(&self) -> f64 {
+        self.rot.m.min(self.m)
+    }
+
+    /// Updates `m_h` after sample `index`; `changed` says whether `m_ROT` or `m_ADR` moved.
+    fn after_sample(&mut self, index: u64, changed: bool) {
+        let Some(adr) = &self.adr else {
+            self.m = self.m.max(self.rot.m);
+            return;
+        };
+        let (m_rot, m_adr) = (self.rot.m, adr.m);
+        self.m = self.m.max(m_adr);
+        if !changed {
+            return;
+        }
+        let agree = m_rot.is_finite()
+            && m_adr.is_finite()
+            && (m_rot - m_adr).abs() <= self.delta * m_adr.abs();
+        self.streak = if agree { self.streak + 1 } else { 0 };
+        if self.streak == self.t {
+            self.m = self.m.max(m_adr).max(m_rot);
+            self.adr_last = m_adr;
+            self.adr = None;
+            self.switch_index = Some(index);
+        }
+    }
+
+    fn finish_learning(&mut self, index: u64) {
+        let (values, logs) =
+            sorted_with_logs(std::mem::take(&mut self.learning), Some(&mut self.rot));
+        let changed_rot = self.rot.learn_end(&logs);
+        let changed_adr = self.adr.as_mut().is_some_and(|a| a.learn_end(&logs));
+        self.after_sample(index, changed_rot || changed_adr);
+        let (bound, floor) = (self.m, self.floor());
+        for (&s, &l) in values.iter().zip(&logs) {
+            self.ledger.place(s, l, bound, floor);
+        }
+    }
+
+    #[inline(always)]
+    fn push_one(&mut self, s: f64) {
+        let index = self.n;
+        self.n += 1;
+        if self.n <= learn_count(self.learn) {
+            if s == 0.0 {
+                self.ledger.zero();
+            } else {
+                store(&mut self.learning, self.learn, s);
+            }
+            if self.n == learn_count(self.learn) {
+                self.finish_learning(index);
+            }
+            return;
+        }
+        if s == 0.0 {
+            self.ledger.zero();
+            return;
+        }
+        let l = s.ln();
+        self.rot.observe(l);
+        if self.adr.is_none() && l <= self.m {
+            // Switched: ROT alone, and l is at or below m_h >= m_ROT, so nothing moves.
+            self.ledger.accept(s);
+            return;
+        }
+        self.update(index, s, l);
+    }
+
+    fn update(&mut self, index: u64, s: f64, l: f64) {
+        let (old_bound, old_floor) = (self.m, self.floor());
+        let changed_rot = self.rot.update(l, self.ledger.kept());
+        let changed_adr = self.adr.as_mut().is_some_and(|a| a.update(l));
+        self.after_sample(index, changed_rot || changed_adr);
+        let (bound, floor) = (self.m, self.floor());
+        if bound != old_bound || floor != old_floor {
+            self.ledger.settle(bound, floor);
+        }
+        self.ledger.place(s, l, bound, floor);
+    }
+}
+
+impl fmt::Display for PajotHybrid {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "Pajot-hybrid(learn={},T={},delta={}",
+            self.learn, self.t, self.delta
+        )?;
+        fmt_cap(f, &self.ledger)?;
+        write!(f, ")")
+    }
+}
+
+impl Estimator for PajotHybrid {
+    fn push(&mut self, sample: f64) {
+        self.push_one(sample);
+    }
+
+    fn push_slice(&mut self, samples: &[f64]) {
+        for &s in samples {
+            self.push_one(s);
+        }
+    }
+
+    fn count(&self) -> u64 {
+        self.n
+    }
+
+    fn estimate(&self) -> Result<f64> {
+        if self.n == 0 {
+            return Err(super::empty(self));
+        }
+        Ok(self.settled().ledger.mean())
+    }
+
+    fn extras(&self) -> Extras {
+        let s = self.settled();
+        let mut x = common_extras(&s.ledger, s.m);
+        let (single, extended) = s.adr.as_ref().map_or((0, 0), Adr::mode_counts);
+        x.push(("m_rot", Extra::Float(s.rot.m)));
+        x.push((
+            "m_adr",
+            Extra::Float(s.adr.as_ref().map_or(s.adr_last, |a| a.m)),
+        ));
+        x.push(("modes_single", Extra::Int(single)));
+        x.push(("modes_extended", Extra::Int(extended)));
+        x.push(("switched", Extra::Bool(s.switch_index.is_some())));
+        if let Some(i) = s.switch_index {
+            x.push(("switch_index", Extra::Int(i)));
+        }
+        x
+    }
+
+    fn state_bytes(&self) -> usize {
+        size_of::<Self>()
+            + self.learning.capacity() * size_of::<f64>()
+            + self.ledger.heap_bytes()
+            + self.adr.as_ref().map_or(0, Adr::heap_bytes)
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        EstimatorSpec::PajotHybrid {
+            learn: self.learn,
+            t: self.t,
+            delta: self.delta,
+        }
+    }
+
+    fn reset(&mut self) {
+        self.n = 0;
+        self.learning.clear();
+        self.rot = Rot::NEW;
+        match &mut self.adr {
+            Some(a) => {
+                a.modes.clear();
+                a.m = f64::NEG_INFINITY;
+            }
+            None => self.adr = Some(Adr::NEW),
+        }
+        self.adr_last = f64::NEG_INFINITY;
+        self.m = f64::NEG_INFINITY;
+        self.streak = 0;
+        self.switch_index = None;
+        self.ledger.clear();
+    }
+}

@@ -1,0 +1,198 @@
+//! The command line as a user drives it: `fireflies eval` and `fireflies run`.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_fireflies"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fireflies-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn write(path: &Path, text: &str) -> PathBuf {
+    std::fs::write(path, text).unwrap();
+    path.to_path_buf()
+}
+
+fn json_lines(out: &Output) -> Vec<serde_json::Value> {
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout.clone())
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+const RUNNING_EXAMPLE: &str = "0.6 1.5\n0\n2.2 4.8\n350\n4.1\n";
+
+#[test]
+fn eval_prints_one_json_object_per_estimator_in_order() {
+    let dir = scratch("eval");
+    let file = write(&dir.join("s.txt"), RUNNING_EXAMPLE);
+    let out = bin()
+        .args(["eval", "--estimator", "mean", "-e", "gmon:M=5", "-e", "jung:sigma_image=40"])
+        .arg(&file)
+        .output()
+        .unwrap();
+    let lines = json_lines(&out);
+    assert_eq!(lines.len(), 3);
+    assert_eq!(lines[0]["estimator"], "mean");
+    assert_eq!(lines[0]["n"], 7);
+    assert_eq!(lines[0]["estimate"].as_f64().unwrap(), 363.2 / 7.0);
+    assert_eq!(lines[1]["estimator"], "gmon:M=5");
+    assert!((lines[1]["estimate"].as_f64().unwrap() - 3.266666666666667).abs() < 1e-12);
+    assert!((lines[1]["gini"].as_f64().unwrap() - 0.7632631010264719).abs() < 1e-12);
+    assert_eq!(lines[2]["M"], 5);
+    assert_eq!(lines[2]["estimate"].as_f64().unwrap(), 2.8);
+    // Keys keep the documented order: estimator, n, estimate, then extras.
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.lines().next().unwrap().starts_with(r#"{"estimator":"mean","n":7,"estimate":"#));
+}
+
+#[test]
+fn eval_reads_stdin_when_no_file_or_dash() {
+    for args in [vec!["eval", "-e", "mon:M=5"], vec!["eval", "-e", "mon:M=5", "-"]] {
+        let mut child = bin()
+            .args(&args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        child
+            .stdin
+            .take()
+            .unwrap()
+            .write_all(RUNNING_EXAMPLE.as_bytes())
+            .unwrap();
+        let lines = json_lines(&child.wait_with_output().unwrap());
+        assert_eq!(lines[0]["estimate"].as_f64().unwrap(), 2.8);
+    }
+}
+
+#[test]
+fn eval_input_errors_exit_2_and_name_the_problem() {
+    let dir = scratch("eval-errors");
+    let cases = [
+        ("bad.txt", "1 2\n3 x4\n", "mean", "bad.txt:2: malformed number 'x4'"),
+        ("neg.txt", "1\n-2\n", "mean", "neg.txt:2: invalid sample at index 1: -2"),
+        ("empty.txt", "\n  \n", "mean", "no samples"),
+        ("ok.txt", "1", "median:M=3", "unknown estimator 'median'"),
+        ("ok2.txt", "1", "mon:M=0", "M = 0"),
+    ];
+    for (name, text, spec, expected) in cases {
+        let file = write(&dir.join(name), text);
+        let out = bin().args(["eval", "-e", spec]).arg(&file).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{name}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(expected), "{name}: {err}");
+    }
+    let out = bin().args(["eval", "-e", "mean", "/nonexistent/x.txt"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/x.txt"));
+    let out = bin().args(["eval"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2), "missing --estimator is a usage error");
+}
+
+#[test]
+fn eval_block_evaluates_the_centre_with_its_neighbours() {
+    let dir = scratch("block");
+    let neighbour = "1 1 1 1 1 1 1\n";
+    let files: Vec<PathBuf> = (0..9)
+        .map(|i| {
+            let text = if i == 4 { RUNNING_EXAMPLE } else { neighbour };
+            write(&dir.join(format!("p{i}.txt")), text)
+        })
+        .collect();
+    let out = bin()
+        .args(["eval", "-e", "zirr:J=6", "-e", "mean", "--block"])
+        .args(&files)
+        .output()
+        .unwrap();
+    let lines = json_lines(&out);
+    assert!((lines[0]["estimate"].as_f64().unwrap() - 1.8857142857142857).abs() < 1e-12);
+    assert_eq!(lines[1]["estimate"].as_f64().unwrap(), 363.2 / 7.0);
+    // An empty file is a pixel outside the image; an empty centre is an error.
+    write(&dir.join("p0.txt"), "");
+    let out = bin().args(["eval", "-e", "zirr", "--block"]).args(&files).output().unwrap();
+    assert!(out.status.success());
+    write(&dir.join("p4.txt"), "");
+    let out = bin().args(["eval", "-e", "zirr", "--block"]).args(&files).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+const TINY: &str = r#"
+name = "tiny"
+seed = 7
+trials = 600
+checkpoints = [8, 64]
+estimators = ["mean", "mon:M=21", "gmon:M=5", "zirr"]
+[[distributions]]
+dist = { kind = "preset", name = "caustic" }
+[[distributions]]
+label = "pareto"
+dist = { kind = "pareto", scale = 1.0, shape = 2.5 }
+[checks]
+robust = ["mon:M=21"]
+firefly_ceiling = 0.5
+"#;
+
+#[test]
+fn run_writes_every_table_and_is_identical_across_thread_counts() {
+    let dir = scratch("run");
+    let exp = write(&dir.join("tiny.toml"), TINY);
+    let mut csvs = Vec::new();
+    for threads in ["1", "2"] {
+        let out_dir = dir.join(format!("out{threads}"));
+        let out = bin()
+            .arg("run")
+            .arg(&exp)
+            .args(["--threads", threads, "--out"])
+            .arg(&out_dir)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        for f in ["results.csv", "summary.md", "manifest.json", "checks.json"] {
+            assert!(out_dir.join(f).metadata().unwrap().len() > 0, "{f}");
+        }
+        let csv = std::fs::read_to_string(out_dir.join("results.csv")).unwrap();
+        // Timing rows legitimately differ between runs; everything else must not.
+        let stable: Vec<String> = csv
+            .lines()
+            .filter(|l| !l.contains("ns_per_sample"))
+            .map(String::from)
+            .collect();
+        csvs.push(stable);
+        let manifest: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out_dir.join("manifest.json")).unwrap())
+                .unwrap();
+        assert_eq!(manifest["trials"], 600);
+        assert!(manifest["samples_per_s"].as_f64().unwrap() > 0.0);
+    }
+    assert_eq!(csvs[0], csvs[1]);
+    assert!(csvs[0].len() > 100);
+}
+
+#[test]
+fn run_errors_name_the_line_and_the_path() {
+    let dir = scratch("run-errors");
+    let exp = write(&dir.join("bad.toml"), &TINY.replace("trials = 600", "trials = 600\ntrails = 2"));
+    let out = bin().arg("run").arg(&exp).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("trails") && err.contains("line"), "{err}");
+    let exp = write(&dir.join("ok.toml"), TINY);
+    let out = bin()
+        .arg("run")
+        .arg(&exp)
+        .args(["--out", "/proc/fireflies-not-writable"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/proc/fireflies-not-writable"));
+}
