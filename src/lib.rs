@@ -4,11 +4,14 @@
 //! Gini-adaptive variants, Jung et al.'s dynamic MoN, Zirr et al.'s firefly reweighting and
 //! Pajot et al.'s outlier delaying — on heavy-tailed samples whose true mean is known exactly.
 //!
-//! Layers (arrows point down): the command line -> [`dist`] -> [`estimators`] -> [`error`].
+//! Layers (arrows point down): the command line -> [`report`] / [`harness`] -> [`dist`] ->
+//! [`estimators`] -> [`error`].
 //! The estimator contract, with worked examples, is `spec/estimators.md`.
 
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
+// Parameter checks are written `if !(x > 0.0)` on purpose: NaN must fail them too.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod dist;
 pub mod error;

@@ -555,3 +555,24 @@ fn gini_of_equal_set_means_is_clamped_to_zero() {
         assert_eq!(extra(e.as_ref(), "gini"), Some(Extra::Float(0.0)));
     }
 }
+
+#[test]
+fn state_size_does_not_grow_with_the_stream() {
+    // Constant memory: the per-pixel state after 10^5 samples is what it was before the first.
+    let xs: Vec<f64> = (0..100_000).map(|i| (i % 1000) as f64 * 0.01).collect();
+    for &spec in ALL {
+        let mut e = run(spec, &[]);
+        let before = e.state_bytes();
+        assert!(before > 0, "{spec}");
+        e.push_slice(&xs);
+        e.push(1e30);
+        assert_eq!(e.state_bytes(), before, "{spec}");
+    }
+    // MoN keeps M sets of a compensated sum each (at least 16 bytes a set).
+    let small = run("mon:M=3", &[]).state_bytes();
+    let large = run("mon:M=1000", &[]).state_bytes();
+    assert!(
+        large >= small + 997 * 16,
+        "MoN(3) {small} B, MoN(1000) {large} B"
+    );
+}

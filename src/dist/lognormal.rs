@@ -118,6 +118,14 @@ impl LogNormal {
         let (mu, s) = (self.mu, self.sigma);
         let d = self.standardise(t);
         let l0 = ln_norm_cdf(d);
+        if l0 == f64::NEG_INFINITY {
+            // Even ln P(S < t) underflows (|d| > 1e154): the conditional law is a point at t.
+            return TruncatedMoments {
+                probability: 0.0,
+                mean: t,
+                variance: 0.0,
+            };
+        }
         let l1 = ln_norm_cdf(d - s);
         let l2 = ln_norm_cdf(d - 2.0 * s);
         let mean = (mu + 0.5 * s * s + l1 - l0).exp();

@@ -127,14 +127,32 @@ impl Mixture {
         self.variance
     }
 
-    /// `P(S <= x) = sum w_i F_i(x)`.
+    /// `P(S <= x) = sum w_i F_i(x)`, taken as `1 - sf(x)` above 1/2 so that it reaches 1
+    /// exactly although the weights sum to 1 only within rounding.
     pub fn cdf(&self, x: f64) -> f64 {
-        self.weighted(|d| d.cdf(x)).min(1.0)
+        if x.is_nan() {
+            return f64::NAN;
+        }
+        let c = self.weighted(|d| d.cdf(x));
+        if c <= 0.5 {
+            c
+        } else {
+            1.0 - self.weighted(|d| d.sf(x)).min(1.0)
+        }
     }
 
-    /// `P(S > x) = sum w_i sf_i(x)`, summed directly so that a 1e-5 tail keeps its digits.
+    /// `P(S > x) = sum w_i sf_i(x)`, summed directly so that a 1e-5 tail keeps its digits
+    /// (and taken as `1 - cdf(x)` above 1/2, like [`Mixture::cdf`]).
     pub fn sf(&self, x: f64) -> f64 {
-        self.weighted(|d| d.sf(x)).min(1.0)
+        if x.is_nan() {
+            return f64::NAN;
+        }
+        let s = self.weighted(|d| d.sf(x));
+        if s <= 0.5 {
+            s
+        } else {
+            1.0 - self.weighted(|d| d.cdf(x)).min(1.0)
+        }
     }
 
     fn weighted(&self, f: impl Fn(&Dist) -> f64) -> f64 {
@@ -151,16 +169,25 @@ impl Mixture {
         if t.is_nan() {
             return TruncatedMoments::NAN;
         }
-        let parts: Vec<(f64, TruncatedMoments)> = self
+        let all: Vec<(f64, TruncatedMoments)> = self
             .weights
             .iter()
             .zip(&self.components)
             .map(|(&w, d)| (w, d.truncated_moments(t)))
+            .collect();
+        let parts: Vec<&(f64, TruncatedMoments)> = all
+            .iter()
             .filter(|(w, m)| w * m.probability > 0.0)
             .collect();
-        let probability: f64 = parts.iter().map(|(w, m)| w * m.probability).sum();
+        let mut probability: f64 = parts.iter().map(|(w, m)| w * m.probability).sum();
         if !(probability > 0.0) {
             return TruncatedMoments::EMPTY;
+        }
+        if probability > 0.5 {
+            // Through the complement, so that it is exactly 1 above every sample although
+            // the weights sum to 1 only within rounding.
+            let above: f64 = all.iter().map(|(w, m)| w * (1.0 - m.probability)).sum();
+            probability = 1.0 - above;
         }
         let mean: f64 = parts
             .iter()
@@ -174,7 +201,7 @@ impl Mixture {
             })
             .sum();
         TruncatedMoments {
-            probability: probability.min(1.0),
+            probability,
             mean,
             variance,
         }

@@ -28,7 +28,7 @@ pub struct Pareto {
 impl Pareto {
     /// Checked constructor. `scale` must be finite and > 0; `shape` finite and > 1: an
     /// untruncated Pareto with `shape <= 1` has an infinite mean, so bias is undefined (bound it
-    /// with [`TruncatedPareto`] instead).
+    /// with [`TruncatedPareto`] instead). The mean and any finite variance must fit in f64.
     pub fn new(scale: f64, shape: f64) -> Result<Self> {
         check_positive_finite("scale", scale)?;
         if !(shape > 1.0 && shape.is_finite()) {
@@ -166,7 +166,7 @@ pub struct TruncatedPareto {
 
 impl TruncatedPareto {
     /// Checked constructor: `scale` finite and > 0, `shape` finite and > 0, `upper` finite and
-    /// > `scale`.
+    /// greater than `scale`; the mean and variance must fit in f64.
     pub fn new(scale: f64, shape: f64, upper: f64) -> Result<Self> {
         check_positive_finite("scale", scale)?;
         check_positive_finite("shape", shape)?;

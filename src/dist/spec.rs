@@ -5,11 +5,15 @@
 //!
 //! ```toml
 //! dist = { kind = "preset", name = "caustic" }
+//! # or
 //! dist = { kind = "pareto", scale = 1.0, shape = 1.5 }
-//! dist = { kind = "mixture", components = [
+//! # or
+//! [dist]
+//! kind = "mixture"
+//! components = [
 //!     { weight = 0.9, dist = { kind = "point-mass", value = 0.0 } },
 //!     { weight = 0.1, dist = { kind = "lognormal", mu = 2.0, sigma = 0.5 } },
-//! ] }
+//! ]
 //! ```
 
 use serde::{Deserialize, Serialize};
@@ -180,6 +184,36 @@ mod tests {
         assert!(
             serde_json::from_str::<DistSpec>(r#"{"kind":"pareto","scale":1,"shap":2}"#).is_err()
         );
+    }
+
+    #[test]
+    fn toml_forms_parse() {
+        #[derive(Deserialize)]
+        struct Experiment {
+            dist: Dist,
+        }
+        let e: Experiment =
+            toml::from_str(r#"dist = { kind = "preset", name = "firefly" }"#).unwrap();
+        assert_eq!(e.dist, super::super::Preset::Firefly.dist());
+        let e: Experiment =
+            toml::from_str(r#"dist = { kind = "pareto", scale = 1, shape = 1.5 }"#).unwrap();
+        assert_eq!(e.dist.to_string(), "pareto(scale=1,shape=1.5)");
+        let text = r#"
+            [dist]
+            kind = "mixture"
+            components = [
+                { weight = 0.9, dist = { kind = "point-mass", value = 0.0 } },
+                { weight = 0.1, dist = { kind = "truncated-pareto", scale = 1.0, shape = 0.8, upper = 1e3 } },
+            ]
+        "#;
+        let e: Experiment = toml::from_str(text).unwrap();
+        assert_eq!(
+            e.dist.to_string(),
+            "mixture(0.9*point(value=0) + 0.1*truncated-pareto(scale=1,shape=0.8,upper=1000))"
+        );
+        let bad = toml::from_str::<Experiment>(r#"dist = { kind = "preset", name = "fire" }"#);
+        let msg = bad.err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(msg.contains("fire") && msg.contains("firefly"), "{msg}");
     }
 
     #[test]

@@ -12,7 +12,7 @@ pub fn validate_samples(samples: &[f64], first_index: u64) -> Result<()> {
     // One branch-free pass in the common case; locate the culprit only on failure.
     let all_valid = samples
         .iter()
-        .fold(true, |ok, &s| ok & (s >= 0.0) & (s < f64::INFINITY));
+        .fold(true, |ok, &s| ok & (0.0..f64::INFINITY).contains(&s));
     if all_valid {
         return Ok(());
     }

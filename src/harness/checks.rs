@@ -22,6 +22,16 @@ use crate::estimators::EstimatorSpec;
 use serde::Serialize;
 use statrs::distribution::{Binomial, ContinuousCDF, DiscreteCDF, Normal};
 
+/// Every check kind, as named in results and in `checks.findings`.
+pub const KINDS: [&str; 6] = [
+    "unbiased",
+    "chebyshev",
+    "mon-bound",
+    "zirr-bound",
+    "firefly-ceiling",
+    "firefly-vs-mean",
+];
+
 /// Outcome of one check.
 #[derive(Debug, Clone, Serialize)]
 pub struct CheckResult {
@@ -44,6 +54,15 @@ pub struct CheckResult {
     pub holm_alpha: Option<f64>,
     /// Whether the claim survived.
     pub passed: bool,
+    /// Whether a failure fails the run (false: the check is a reported finding).
+    pub gating: bool,
+}
+
+impl CheckResult {
+    /// A failure that fails the run.
+    pub fn fails_run(&self) -> bool {
+        !self.passed && self.gating
+    }
 }
 
 /// Sets of the median-of-means bound for a failure probability `delta`.
@@ -98,7 +117,7 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
         for (e, spec) in exp.estimators.iter().enumerate() {
             for (i, &n) in cps.iter().enumerate() {
                 let cell = &d.cells[e * cps.len() + i];
-                let mut push = |check, claim: String, observed: String, p_value: f64| {
+                let mut push = |check: &'static str, claim: String, observed: String, p_value: f64| {
                     results.push(CheckResult {
                         check,
                         distribution: d.label.clone(),
@@ -109,6 +128,7 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
                         p_value,
                         holm_alpha: None,
                         passed: true,
+                        gating: !cfg.findings.iter().any(|f| f == check),
                     });
                 };
                 let moments = cell.estimate_moments();
@@ -212,6 +232,7 @@ mod tests {
             p_value: p,
             holm_alpha: None,
             passed: true,
+            gating: true,
         }
     }
 

@@ -60,6 +60,10 @@ pub struct ChecksConfig {
     pub robust: Vec<String>,
     /// Ceiling on the firefly rate `P(X > (1 + tau) mu)` of the `robust` estimators.
     pub firefly_ceiling: f64,
+    /// Check kinds that test a paper's claim about its method rather than this
+    /// implementation (e.g. `zirr-bound`): a failure is reported as a finding and does not
+    /// make the run exit 1.
+    pub findings: Vec<String>,
 }
 
 impl Default for ChecksConfig {
@@ -72,6 +76,7 @@ impl Default for ChecksConfig {
             zirr_bound: true,
             robust: Vec::new(),
             firefly_ceiling: 0.05,
+            findings: Vec::new(),
         }
     }
 }
@@ -187,6 +192,15 @@ impl Experiment {
                 c.firefly_ceiling,
                 "must be in (0, 1]",
             ));
+        }
+        for f in &c.findings {
+            if !super::checks::KINDS.contains(&f.as_str()) {
+                return Err(Error::param(
+                    "checks.findings",
+                    f,
+                    format!("is not a check kind; valid: {}", super::checks::KINDS.join(", ")),
+                ));
+            }
         }
         let estimators = file
             .estimators

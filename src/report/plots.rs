@@ -8,7 +8,7 @@
 //! Text is drawn with DejaVu Sans embedded from the `dejavu` crate and registered with
 //! plotters' `ab_glyph` renderer, so drawing needs no system fonts and no fontconfig.
 //!
-//! The work is split in two: builders turn rows into a [`Figure`], a plain description of
+//! The work is split in two: builders turn rows into a `Figure`, a plain description of
 //! panels, axes and marks; one renderer draws any figure on any plotters backend.
 
 use crate::error::{Error, Result};
@@ -35,8 +35,9 @@ const FAN_PANEL: (u32, u32) = (400, 300);
 const MARGIN: i32 = 16;
 /// Opacity of a 95% confidence band.
 const CI_ALPHA: f64 = 0.18;
-/// Grey of reference lines (zero, 1/n) and of grid lines.
+/// Grey of reference lines (zero, 1/n) and neutral legend swatches.
 const REF_GREY: RGBColor = RGBColor(110, 110, 110);
+/// Grey of grid lines.
 const GRID_GREY: RGBColor = RGBColor(228, 228, 228);
 
 /// Colour of the plain mean, the baseline every robust estimator is judged against.
@@ -313,6 +314,8 @@ enum LegendKind {
 
 struct Panel {
     title: String,
+    /// A remark written in the top left corner of the plotting area.
+    note: Option<String>,
     x: Axis,
     y: Axis,
     marks: Vec<Mark>,
@@ -392,7 +395,6 @@ enum Mark {
     },
 }
 
-/// Lines (with markers) and, where the CSV has intervals, bands for one estimator's series.
 /// How a series shows its 95% intervals.
 #[derive(Clone, Copy, PartialEq)]
 enum Spread {
@@ -404,6 +406,7 @@ enum Spread {
     Bars(f64),
 }
 
+/// The line of one estimator's series and, where the CSV has intervals, its bands or bars.
 fn series_marks(pts: &[Pt], colour: RGBColor, spread: Spread) -> Vec<Mark> {
     let mut marks = Vec::new();
     if let Spread::Bars(shift) = spread {
@@ -426,29 +429,26 @@ fn series_marks(pts: &[Pt], colour: RGBColor, spread: Spread) -> Vec<Mark> {
         });
         return marks;
     }
-    {
-        // One band per run of consecutive points that all have an interval; a lone point with
-        // an interval gets a band of zero width, so draw it as an error bar instead.
-        for run in pts.split(|p| p.ci.is_none()).filter(|r| !r.is_empty()) {
-            if run.len() == 1 {
-                let p = run[0];
-                marks.push(Mark::Point {
-                    x: p.n,
-                    y: p.v,
-                    ci: p.ci,
-                    colour,
-                    label: String::new(),
-                });
-                continue;
-            }
-            marks.push(Mark::Band {
-                x: run.iter().map(|p| p.n).collect(),
-                lo: run.iter().map(|p| p.ci.map_or(p.v, |c| c.0)).collect(),
-                hi: run.iter().map(|p| p.ci.map_or(p.v, |c| c.1)).collect(),
+    // One band per run of consecutive points that all have an interval; a lone point with an
+    // interval would make a band of zero width, so it gets an error bar instead.
+    for run in pts.split(|p| p.ci.is_none()).filter(|r| !r.is_empty()) {
+        if let [p] = run {
+            marks.push(Mark::Point {
+                x: p.n,
+                y: p.v,
+                ci: p.ci,
                 colour,
-                alpha: CI_ALPHA,
+                label: String::new(),
             });
+            continue;
         }
+        marks.push(Mark::Band {
+            x: run.iter().map(|p| p.n).collect(),
+            lo: run.iter().map(|p| p.ci.map_or(p.v, |c| c.0)).collect(),
+            hi: run.iter().map(|p| p.ci.map_or(p.v, |c| c.1)).collect(),
+            colour,
+            alpha: CI_ALPHA,
+        });
     }
     marks.push(Mark::Line {
         pts: pts.iter().map(|p| (p.n, p.v)).collect(),
@@ -486,11 +486,12 @@ const BAND_LEGEND: &str = "shaded: 95% confidence interval";
 /// Nudge between neighbouring estimators' error bars, decades of n.
 const DODGE: f64 = 0.045;
 
+/// Says where a figure draws no band because `results.csv` has no interval.
 fn ci_note(data: &Data, metric: &str, what: &str) -> Option<String> {
     data.missing_ci(metric, &data.ests).map(|who| {
         format!(
-            "No band for {who}: results.csv has no interval there because the variance is \
-             infinite, so no {what} interval is meaningful."
+            "No band for {who}: results.csv gives no interval there (on a law of infinite \
+             variance no {what} interval is meaningful)."
         )
     })
 }
@@ -516,6 +517,7 @@ fn per_distribution(data: &Data, metric: &str, y: Axis, bars: bool) -> Vec<Panel
                 x: x.clone(),
                 y: y.clone(),
                 marks: layered(marks),
+                note: None,
             }
         })
         .collect()
@@ -565,7 +567,7 @@ fn bias(data: &Data) -> Option<Figure> {
     let mut panels = per_distribution(
         data,
         M,
-        Axis::linear("bias: mean estimate − μ (pixel value)"),
+        Axis::linear("bias: E[estimate] − μ (pixel value)"),
         false,
     );
     for p in &mut panels {
@@ -635,6 +637,7 @@ fn variance_mse(data: &Data) -> Option<Figure> {
                 x: x.clone(),
                 y: Axis::log(format!("{name} (pixel value²)")),
                 marks: layered(marks),
+                note: None,
             });
         }
         // Share the y range within the pair so variance and MSE compare by eye.
@@ -680,12 +683,21 @@ fn firefly_rate(data: &Data) -> Option<Figure> {
     if !data.has_metric(M) {
         return None;
     }
-    let panels = per_distribution(
+    let mut panels = per_distribution(
         data,
         M,
         Axis::linear("firefly rate (fraction of trials)"),
         true,
     );
+    for (p, d) in panels.iter_mut().zip(&data.dists) {
+        let none = data
+            .ests
+            .iter()
+            .all(|e| data.get(d, e, M).iter().all(|q| q.v == 0.0));
+        if none {
+            p.note = Some("no firefly in any trial".into());
+        }
+    }
     let notes = vec![
         "Firefly: a trial whose estimate exceeds (1 + τ)·μ. Bars: Wilson 95% intervals, each \
          estimator nudged sideways so that none hides another; where no trial had a firefly \
@@ -766,6 +778,7 @@ fn error_quantiles(data: &Data) -> Option<Figure> {
                 x: x.clone(),
                 y: Axis::log("|estimate − μ| / μ"),
                 marks,
+                note: None,
             });
         }
         // One y range per distribution so estimators compare along the row.
@@ -851,6 +864,7 @@ fn speed_vs_error(data: &Data) -> Option<Figure> {
             x: Axis::log("time per sample (ns)"),
             y: Axis::log(format!("relative RMSE at n = {n_max}")),
             marks,
+            note: None,
         });
     }
     let mut legend = data.estimator_legend(&data.ests);
@@ -863,7 +877,8 @@ fn speed_vs_error(data: &Data) -> Option<Figure> {
     )];
     if let Some(who) = data.missing_ci("relative_rmse", &data.ests) {
         notes.push(format!(
-            "No bar for {who}: the variance is infinite, so no RMSE interval is meaningful."
+            "No bar for {who}: results.csv gives no interval there (on a law of infinite \
+             variance no RMSE interval is meaningful)."
         ));
     }
     Some(Figure {
@@ -964,11 +979,8 @@ fn resolve_range(axis: &Axis, marks: &[Mark], vertical: bool) -> (f64, f64) {
         _ if axis.log => (0.1, 10.0),
         _ => (0.0, 1.0),
     };
-    let (t, inv): (fn(f64) -> f64, fn(f64) -> f64) = if axis.log {
-        (f64::log10, |v| 10f64.powf(v))
-    } else {
-        (|v| v, |v| v)
-    };
+    let t = |v: f64| if axis.log { v.log10() } else { v };
+    let inv = |v: f64| if axis.log { 10f64.powf(v) } else { v };
     let (mut a, mut b) = (t(lo), t(hi));
     let min_span = if axis.log {
         0.3
@@ -1353,14 +1365,6 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel) -> D
         .bold_line_style(GRID_GREY.stroke_width(1))
         .light_line_style(TRANSPARENT)
         .draw()?;
-    if p.marks.is_empty() {
-        chart.plotting_area().draw(&Text::new(
-            "no data",
-            (x.lo, y.hi),
-            TextStyle::from(font(16.0)).color(&REF_GREY),
-        ))?;
-        return Ok(());
-    }
     let usable = |c: &Coord, v: f64| v.is_finite() && (!c.log || v > 0.0);
     let mut labels = Vec::new();
     // Pixel boxes (x, y, w, h) relative to `area` that labels must not cover.
@@ -1404,7 +1408,9 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel) -> D
                 let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
                 for q in pts {
                     if ok(&q) {
-                        runs.last_mut().map(|r| r.push(*q));
+                        if let Some(run) = runs.last_mut() {
+                            run.push(*q);
+                        }
                     } else if runs.last().is_some_and(|r| !r.is_empty()) {
                         runs.push(Vec::new());
                     }
@@ -1473,6 +1479,27 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, p: &Panel) -> D
                 }
             }
         }
+    }
+    let note = if p.marks.is_empty() {
+        Some("no data")
+    } else {
+        p.note.as_deref()
+    };
+    if let Some(note) = note {
+        // On a white card, so that it reads over whatever it covers.
+        let (nx, ny) = chart.plotting_area().get_base_pixel();
+        let base = area.get_base_pixel();
+        let (nx, ny) = (nx - base.0 + 10, ny - base.1 + 8);
+        let (w, h) = font(14.0).box_size(note).unwrap_or((0, 0));
+        area.draw(&Rectangle::new(
+            [(nx - 5, ny - 4), (nx + w as i32 + 5, ny + h as i32 + 4)],
+            WHITE.mix(0.9).filled(),
+        ))?;
+        area.draw_text(
+            note,
+            &TextStyle::from(font(14.0)).color(&RGBColor(60, 60, 60)),
+            (nx, ny),
+        )?;
     }
     if !labels.is_empty() {
         let plot = chart.plotting_area();

@@ -98,6 +98,8 @@
 mod adr;
 mod ledger;
 mod rot;
+#[cfg(test)]
+mod tests;
 
 pub use adr::{PajotMode, adr_bandwidths};
 
@@ -109,14 +111,9 @@ use rot::Rot;
 use std::borrow::Cow;
 use std::fmt;
 
-
 /// Calls `emit(lo, hi, count)` for each run of consecutive values of the ascending `xs` in
 /// which `linked(i)` holds between `xs[i]` and `xs[i + 1]`.
-fn for_each_run(
-    xs: &[f64],
-    linked: impl Fn(usize) -> bool,
-    mut emit: impl FnMut(f64, f64, u64),
-) {
+fn for_each_run(xs: &[f64], linked: impl Fn(usize) -> bool, mut emit: impl FnMut(f64, f64, u64)) {
     let mut start = 0;
     for i in 0..xs.len() {
         if i + 1 == xs.len() || !linked(i) {
@@ -697,8 +694,9 @@ impl PajotHybrid {
         }
         let l = s.ln();
         self.rot.observe(l);
-        if self.adr.is_none() && l <= self.m {
-            // Switched: ROT alone, and l is at or below m_h >= m_ROT, so nothing moves.
+        if self.adr.is_none() && l <= self.rot.m {
+            // Switched: ROT alone, and l <= m_ROT <= m_h, so nothing moves and l need not be
+            // kept. (Between m_ROT and m_h, l is accepted but is one of ROT's overlap points.)
             self.ledger.accept(s);
             return;
         }
