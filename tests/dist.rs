@@ -208,16 +208,16 @@ fn is_continuous(d: &Dist) -> bool {
     d.atoms().is_empty()
 }
 
-/// Number of hypothesis tests in the family: one KS test per continuous law, one chi-square
-/// and one tail-count test per law, one mean test per law with `mean_log2_n`, and
-/// `TRUNC_STATS` conditional-moment statistics per law (120 in all).
+/// Number of hypothesis tests in the family: one KS test per continuous law (14), one
+/// chi-square and one tail-count test per law (2 x 18), one mean test per law with
+/// `mean_log2_n` (14), and `TRUNC_STATS` conditional-moment statistics per law (6 x 18): 172.
 fn family_size() -> usize {
     let ks = LAWS.iter().filter(|l| is_continuous(&(l.make)())).count();
     let mean = LAWS.iter().filter(|l| l.mean_log2_n.is_some()).count();
     ks + 2 * LAWS.len() + mean + TRUNC_STATS * LAWS.len()
 }
 
-/// Šidák per-test alpha: `1 - (1 - FAMILY_ALPHA)^(1/K)`, about 8.3e-6 for K = 120. (Valid for
+/// Šidák per-test alpha: `1 - (1 - FAMILY_ALPHA)^(1/K)`, 5.82e-6 for K = 172. (Valid for
 /// independent tests, which the per-test seeds give, and conservative for the jointly normal
 /// z statistics that share a sample.)
 fn per_test_alpha() -> f64 {
@@ -225,7 +225,7 @@ fn per_test_alpha() -> f64 {
     -((-FAMILY_ALPHA).ln_1p() / k).exp_m1()
 }
 
-/// Two-sided critical |z| at the per-test alpha.
+/// Two-sided critical |z| at the per-test alpha: 4.53.
 fn z_critical() -> f64 {
     let alpha = per_test_alpha();
     let (mut lo, mut hi) = (0.0f64, 40.0f64);
@@ -857,8 +857,9 @@ proptest! {
 
 /// One-sample Kolmogorov-Smirnov test of each continuous law, n = 2^18 draws against the
 /// exact CDF. Asymptotic p-value with Stephens' small-n correction. At the per-test alpha
-/// (~8e-6) the critical statistic is D ~ 2.5 / sqrt(n) ~ 0.0049: a sampler whose CDF is off by
-/// 0.005 anywhere fails with probability ~1/2, by 0.007 almost surely.
+/// (5.8e-6) the critical statistic is D = 2.52 / sqrt(n) = 0.0049: a sampler whose CDF is off
+/// by 0.005 anywhere fails with probability ~1/2, by 0.007 almost surely. (A Pareto sampler
+/// with shape 1.52 instead of 1.5 gives D ~ 0.0056 and fails.)
 #[test]
 fn kolmogorov_smirnov_continuous_laws() {
     let alpha = per_test_alpha();
@@ -939,8 +940,10 @@ fn chi2_cells(d: &Dist) -> (Vec<f64>, Vec<f64>) {
 /// Chi-square goodness of fit of every law, n = 2^21 draws, over equiprobable cells plus
 /// atom and tail cells (so the spike of `caustic`, the zeros of `mirror-lit` and the far tails
 /// are each tested), adjacent cells pooled to at least 5 expected counts. At the per-test
-/// alpha with ~45 degrees of freedom the critical value is ~ dof + 4.5 sqrt(2 dof) ~ 88: for
-/// instance an atom of weight 4.5e-4 off by 10% (chi-square contribution ~94) is caught.
+/// alpha with ~42 degrees of freedom the critical value is ~95, so a defect with
+/// non-centrality n sum (dp)^2 / p above ~55 is caught with probability 1/2: for instance a
+/// lognormal sigma off by 1% (~400), or an atom expecting E draws off by a relative 7.4/sqrt(E)
+/// (25% for the caustic spike, E = 943; the far-tail test resolves it better).
 #[test]
 fn chi_square_all_laws() {
     let alpha = per_test_alpha();
@@ -988,10 +991,11 @@ fn chi_square_all_laws() {
     report("chi-square", failures);
 }
 
-/// Exact binomial test of the count of draws above the far-tail point `t` where
-/// P(S > t) first drops below 1e-5 (for `caustic` that is the spike at 2000, P = 4.5e-4),
-/// n = 2^22 draws, so ~42 expected hits. A missing tail (0 hits) or one at half or double its
-/// weight is caught.
+/// Exact two-sided binomial test of the count of draws above the far-tail point `t` where
+/// P(S > t) first drops below 1e-5 (for `caustic` that is just below the spike at 2000, so
+/// P = 4.5e-4), n = 2^22 draws, so ~42 expected hits (1887 for `caustic`). A missing tail
+/// (0 hits, p ~ 1e-18) or one at double its weight is caught; for the caustic spike a 13% error
+/// in its weight.
 #[test]
 fn far_tail_counts() {
     let alpha = per_test_alpha();
@@ -1025,9 +1029,10 @@ fn far_tail_counts() {
 
 /// Exact-mean z-test of every law with finite variance (and finite third moment), with the
 /// exact variance: z = (mean of n draws - mean) / sqrt(variance / n), n = 2^20 or more, two-
-/// sided at the per-test alpha (|z| < ~4.46). A relative bias of (4.46 + 2.33) sd / sqrt(n)
-/// — 0.35% for `diffuse`, 6.6% for `caustic`, 5.5% for `mirror-lit` — is caught with
-/// probability 0.99. Before testing, the z statistic's skewness (from the numerically
+/// sided at the per-test alpha (|z| < 4.53). A bias of (4.53 + 2.33) sd / sqrt(n) is caught
+/// with probability 0.99: relative to the mean 0.36% for `diffuse`, 2.0% for `glossy`, 20%
+/// for `caustic` (whose spike frequency the far-tail test checks more finely), 5.7% for
+/// `mirror-lit`. Before testing, the z statistic's skewness (from the numerically
 /// integrated third moment) is checked to be below `MAX_MEAN_SKEW`, so the normal tail applies.
 #[test]
 fn exact_mean_z_tests() {
@@ -1067,7 +1072,9 @@ fn exact_mean_z_tests() {
 /// Conditional moments against draws: at thresholds t at the median and the 99th percentile
 /// of the law's non-zero part, the fraction of draws below t, the mean of S 1{S < t} and the
 /// mean of S^2 1{S < t} are compared with `truncated_moments(t)` by studentized z-tests
-/// (n = 2^20, |z| < ~4.46). A 0.5% error in E[S; S < t] at the median of `diffuse` is caught.
+/// (n = 2^20, |z| < 4.53; the six statistics of a law share one sample, for which Šidák's
+/// inequality still holds). A 0.6% error in E[S; S < t] at the median of `diffuse` is caught
+/// with probability 0.99.
 #[test]
 fn truncated_moments_match_draws() {
     let z_crit = z_critical();

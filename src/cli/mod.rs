@@ -1,6 +1,7 @@
 //! Subcommands of the `fireflies` binary; each lives in its own module.
 
 mod eval;
+mod merge;
 mod run;
 
 use clap::{Parser, Subcommand};
@@ -21,6 +22,8 @@ enum Command {
     Eval(eval::EvalArgs),
     /// Run an experiment (default: the embedded one) and write its report.
     Run(run::RunArgs),
+    /// Merge shard files of one run into its report.
+    Merge(merge::MergeArgs),
 }
 
 /// Runs the chosen subcommand; `Err` exits with status 2.
@@ -28,6 +31,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
         Some(Command::Eval(args)) => eval::run(&args),
         Some(Command::Run(args)) => run::run(&args),
+        Some(Command::Merge(args)) => merge::run(&args),
         None => run::run(&run::RunArgs::default()),
     }
 }

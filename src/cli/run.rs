@@ -1,7 +1,9 @@
 //! `fireflies run`: an experiment from a TOML file (or the embedded default) to a report.
 
 use clap::Args;
-use fireflies::harness::{self, Experiment, RunOptions};
+use fireflies::harness::runner::{self, Shard};
+use fireflies::harness::shards::ShardFile;
+use fireflies::harness::{self, Experiment, RunOutput, RunOptions};
 use fireflies::{Result, report};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -20,6 +22,10 @@ pub struct RunArgs {
     /// Worker threads (default: one per core). Results do not depend on it.
     #[arg(long)]
     threads: Option<usize>,
+    /// Run only shard i of k (`i/k`, 0-based) and write its mergeable statistics to
+    /// `DIR/shard-i-of-k.json`; `fireflies merge` combines the shards into the report.
+    #[arg(long, value_name = "i/k")]
+    shard: Option<String>,
 }
 
 pub fn run(args: &RunArgs) -> Result<ExitCode> {
@@ -46,10 +52,25 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         opts.trials.unwrap_or(exp.file.trials),
         exp.max_n()
     );
+    if let Some(text) = &args.shard {
+        let shard = Shard::parse(text)?;
+        let output = runner::run_shard(&exp, &opts, shard)?;
+        let path = dir.join(ShardFile::file_name(shard.index, shard.count));
+        let json = serde_json::to_vec(&ShardFile::new(&exp, output))
+            .map_err(|e| fireflies::Error::io(path.display(), &std::io::Error::other(e)))?;
+        report::write_atomic(&path, &json)?;
+        eprintln!("wrote {}", path.display());
+        return Ok(ExitCode::SUCCESS);
+    }
     let out = harness::run(&exp, &opts)?;
-    let checks = harness::checks::evaluate(&exp, &out);
-    let rows = report::write_tables(&dir, &exp, &out, &checks)?;
-    report::plots::write_plots(&dir, &rows)?;
+    report_run(&dir, &exp, &out)
+}
+
+/// Checks, tables and plots of a finished run; exit code 1 when a gating check failed.
+pub fn report_run(dir: &std::path::Path, exp: &Experiment, out: &RunOutput) -> Result<ExitCode> {
+    let checks = harness::checks::evaluate(exp, out);
+    let rows = report::write_tables(dir, exp, out, &checks)?;
+    report::plots::write_plots(dir, &rows)?;
     let failed: Vec<_> = checks.iter().filter(|c| !c.passed).collect();
     let fails_run = checks.iter().any(|c| c.fails_run());
     eprintln!(

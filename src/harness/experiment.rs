@@ -126,8 +126,10 @@ pub struct Distribution {
 pub struct Experiment {
     /// Report directory name.
     pub name: String,
-    /// The file as written (for the manifest).
+    /// The file as parsed (for the manifest).
     pub file: ExperimentFile,
+    /// The TOML text it was parsed from (shards carry it so a merge rebuilds the same run).
+    pub source_toml: String,
     /// Parsed estimators, in file order.
     pub estimators: Vec<EstimatorSpec>,
     /// Built distributions, in file order.
@@ -142,7 +144,7 @@ impl Experiment {
             path: source.to_string(),
             message: e.to_string().trim_end().to_string(),
         })?;
-        Self::from_file(file, default_name)
+        Self::from_file(file, text, default_name)
     }
 
     /// Reads an experiment from disk.
@@ -159,7 +161,7 @@ impl Experiment {
         Self::from_toml(DEFAULT_TOML, "experiments/default.toml (embedded)", "default")
     }
 
-    fn from_file(file: ExperimentFile, default_name: &str) -> Result<Self> {
+    fn from_file(file: ExperimentFile, text: &str, default_name: &str) -> Result<Self> {
         if file.trials < 4 {
             return Err(Error::param("trials", file.trials, "must be at least 4 (spec §7)"));
         }
@@ -245,6 +247,7 @@ impl Experiment {
         Ok(Experiment {
             name: file.name.clone().unwrap_or_else(|| default_name.to_string()),
             file,
+            source_toml: text.to_string(),
             estimators,
             distributions,
         })

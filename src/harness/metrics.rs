@@ -11,8 +11,37 @@
 //! variance and MSE intervals do not. Quantiles come from the histogram, so they are exact to
 //! within one bin: a factor `10^(1/BINS_PER_DECADE)` (2.3%).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+
+/// Serde for `f64` as its bit pattern: exact, and non-finite values survive JSON.
+mod f64_bits {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(x: &f64, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_u64(x.to_bits())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        u64::deserialize(d).map(f64::from_bits)
+    }
+}
+
+/// [`f64_bits`] for an optional value.
+mod opt_f64_bits {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(x: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+        match x {
+            Some(v) => s.serialize_some(&v.to_bits()),
+            None => s.serialize_none(),
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+        Option::<u64>::deserialize(d).map(|o| o.map(f64::from_bits))
+    }
+}
 
 /// Two-sided 95% normal quantile used by every interval (spec §7).
 pub const Z: f64 = 1.96;
@@ -21,12 +50,16 @@ pub const Z: f64 = 1.96;
 pub const BINS_PER_DECADE: f64 = 100.0;
 
 /// Running count, mean and central moments M2..M4, with Pébay's exact pairwise merge.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Moments {
     n: u64,
+    #[serde(with = "f64_bits")]
     mean: f64,
+    #[serde(with = "f64_bits")]
     m2: f64,
+    #[serde(with = "f64_bits")]
     m3: f64,
+    #[serde(with = "f64_bits")]
     m4: f64,
 }
 
@@ -102,7 +135,7 @@ impl Moments {
 
 /// Log-binned histogram of non-negative values; zeros have their own bin. Integer counts, so
 /// merging is exact in any order.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct LogHistogram {
     zeros: u64,
     bins: BTreeMap<i32, u64>,
@@ -201,7 +234,7 @@ pub fn wilson(successes: u64, trials: u64) -> Interval {
 }
 
 /// Mergeable per-cell statistics of one estimator at one sample count.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct CellAccumulator {
     estimate: Moments,
     squared_error: Moments,
@@ -219,6 +252,7 @@ pub struct CellAccumulator {
     /// Trials where the mean gave a firefly and this estimator did not.
     mean_not_firefly: u64,
     /// A bound on `|X - mu|` a check tests (Chebyshev, median-of-means), if any.
+    #[serde(with = "opt_f64_bits")]
     deviation_threshold: Option<f64>,
     /// Trials with `|X - mu| > deviation_threshold`.
     exceedances: u64,
@@ -259,21 +293,26 @@ impl CellAccumulator {
         self.fireflies
     }
 
-    /// The estimate's moments (for checks).
-    pub fn estimate_moments(&self) -> &Moments {
+    /// Moments of the relative estimate `X / mu` (for checks).
+    pub fn relative_estimate_moments(&self) -> &Moments {
         &self.estimate
     }
 
     /// Adds one trial against the true mean `mu` with firefly threshold `(1 + tau) mu`.
+    ///
+    /// Moments are kept on the relative estimate `X / mu`, so a law at scale 1e300 or
+    /// 1e-300 accumulates numbers near 1; absolute metrics are scaled back at the end (and may
+    /// then over- or underflow, which is what they are).
     pub fn push(&mut self, o: Observation, mu: f64, tau: f64) {
-        let err = o.estimate - mu;
-        let rel = err.abs() / mu;
-        self.estimate.push(o.estimate);
+        let x = o.estimate / mu;
+        let x_mean = o.mean_estimate / mu;
+        let (err, mean_err) = (x - 1.0, x_mean - 1.0);
+        let rel = err.abs();
+        self.estimate.push(x);
         self.squared_error.push(err * err);
         self.abs_rel_error.push(rel);
         self.abs_rel_hist.push(rel);
-        let mean_err = o.mean_estimate - mu;
-        self.paired_abs_rel.push(rel - mean_err.abs() / mu);
+        self.paired_abs_rel.push(rel - mean_err.abs());
         self.paired_squared.push(err * err - mean_err * mean_err);
         let firefly = o.estimate > (1.0 + tau) * mu;
         let mean_firefly = o.mean_estimate > (1.0 + tau) * mu;
@@ -281,7 +320,7 @@ impl CellAccumulator {
         self.firefly_not_mean += u64::from(firefly && !mean_firefly);
         self.mean_not_firefly += u64::from(mean_firefly && !firefly);
         if let Some(t) = self.deviation_threshold {
-            self.exceedances += u64::from(err.abs() > t);
+            self.exceedances += u64::from((o.estimate - mu).abs() > t);
         }
         self.outlier_trials += u64::from(o.outlier);
         self.rejected += u64::from(o.outlier && !firefly);
@@ -315,15 +354,17 @@ impl CellAccumulator {
             return None;
         }
         let tf = t as f64;
+        let mu2 = mu * mu;
+        // Relative units throughout; `* mu` and `* mu2` convert to sample units at the end.
         let s2 = self.estimate.sample_variance();
         let var_se = ((self.estimate.m4() - s2 * s2 * (tf - 3.0) / (tf - 1.0)) / tf)
             .max(0.0)
             .sqrt();
         let mse = self.squared_error.mean();
         let mse_se = self.squared_error.standard_error();
-        let rel_rmse = mse.sqrt() / mu;
+        let rel_rmse = mse.sqrt();
         let relative_rmse = if mse > 0.0 {
-            Interval::symmetric(rel_rmse, mse_se / (2.0 * mu * mse.sqrt()))
+            Interval::symmetric(rel_rmse, mse_se / (2.0 * rel_rmse))
         } else {
             Interval::bare(rel_rmse)
         };
@@ -338,9 +379,12 @@ impl CellAccumulator {
         };
         Some(CellMetrics {
             trials: t,
-            bias: Interval::symmetric(self.estimate.mean() - mu, self.estimate.standard_error()),
-            variance: Interval::symmetric(s2, var_se),
-            mse: Interval::symmetric(mse, mse_se),
+            bias: Interval::symmetric(
+                (self.estimate.mean() - 1.0) * mu,
+                self.estimate.standard_error() * mu,
+            ),
+            variance: Interval::symmetric(s2 * mu2, var_se * mu2),
+            mse: Interval::symmetric(mse * mu2, mse_se * mu2),
             relative_rmse,
             median_abs_rel_error: Interval {
                 value: median,
@@ -361,8 +405,8 @@ impl CellAccumulator {
                 self.paired_abs_rel.standard_error(),
             ),
             paired_mse_vs_mean: Interval::symmetric(
-                self.paired_squared.mean(),
-                self.paired_squared.standard_error(),
+                self.paired_squared.mean() * mu2,
+                self.paired_squared.standard_error() * mu2,
             ),
         })
     }

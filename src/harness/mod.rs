@@ -5,6 +5,7 @@ pub mod checks;
 pub mod experiment;
 pub mod metrics;
 pub mod runner;
+pub mod shards;
 
 pub use checks::CheckResult;
 pub use experiment::Experiment;

@@ -2,9 +2,11 @@
 //! checkpoint within one pass over each trial's samples.
 //!
 //! A trial's random stream is a pure function of (experiment seed, distribution label, trial
-//! index). Trials are grouped into chunks of [`CHUNK_TRIALS`] whatever the thread count; each
-//! chunk is accumulated sequentially and chunks are merged in chunk order, so the floating
-//! point results are bit-identical on 1 or 64 threads.
+//! index). Trials are grouped into chunks of [`CHUNK_TRIALS`] and chunks into blocks of
+//! [`BLOCK_CHUNKS`] whatever the thread count; each chunk is accumulated sequentially, a block
+//! folds its chunks in order and the run folds its blocks in order. That fixed merge tree
+//! makes the floating point results bit-identical on 1 or 64 threads, and lets a run be split
+//! into shards that own whole blocks and merge into the same bits ([`run_shard`], [`fold`]).
 
 use super::checks;
 use super::experiment::{Distribution, Experiment};
@@ -15,14 +17,22 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::time::Instant;
 
-/// Trials per chunk: the unit of work and of deterministic merging.
+/// Trials per chunk: the unit of parallel work.
 pub const CHUNK_TRIALS: u64 = 256;
 
-/// Chunks per block: run in parallel, then merged (bounds memory on long runs).
-pub const BLOCK_CHUNKS: u64 = 64;
+/// Chunks per block. A block is folded chunk by chunk, the run block by block: a fixed merge
+/// tree, so shards owning whole blocks merge into the same bits as a single run.
+pub const BLOCK_CHUNKS: u64 = 8;
+
+/// Trials per block.
+pub const BLOCK_TRIALS: u64 = CHUNK_TRIALS * BLOCK_CHUNKS;
+
+/// Blocks run in parallel before they are folded (bounds memory on long runs).
+const WAVE_BLOCKS: u64 = 16;
 
 /// How to run an experiment.
 #[derive(Debug, Clone, Default)]
@@ -111,8 +121,10 @@ pub fn trial_rng(seed: u64, label: &str, trial: u64) -> Xoshiro256PlusPlus {
     Xoshiro256PlusPlus::seed_from_u64(splitmix64(stream ^ splitmix64(trial)))
 }
 
-/// Per-chunk results, merged in chunk order.
-struct ChunkResult {
+/// Mergeable statistics of a chunk or a block of trials of one distribution: everything a
+/// report needs, no per-trial list.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BlockStats {
     cells: Vec<CellAccumulator>,
     estimator_nanos: Vec<u64>,
     generate_nanos: u64,
@@ -120,9 +132,9 @@ struct ChunkResult {
     state_bytes_sum: Vec<u64>,
 }
 
-impl ChunkResult {
+impl BlockStats {
     fn empty(template: &[CellAccumulator], estimators: usize) -> Self {
-        ChunkResult {
+        BlockStats {
             cells: template.to_vec(),
             estimator_nanos: vec![0; estimators],
             generate_nanos: 0,
@@ -131,7 +143,7 @@ impl ChunkResult {
         }
     }
 
-    fn merge(&mut self, r: &ChunkResult) {
+    fn merge(&mut self, r: &BlockStats) {
         for (a, b) in self.cells.iter_mut().zip(&r.cells) {
             a.merge(b);
         }
@@ -144,18 +156,81 @@ impl ChunkResult {
     }
 }
 
+/// Which share of the blocks a run computes: shard `index` of `count`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Shard {
+    /// 0-based shard number.
+    pub index: u64,
+    /// Number of shards.
+    pub count: u64,
+}
+
+impl Shard {
+    /// The whole run.
+    pub const ALL: Shard = Shard { index: 0, count: 1 };
+
+    /// Parses `i/k` (0 <= i < k).
+    pub fn parse(text: &str) -> Result<Shard> {
+        let bad = || Error::param("shard", text, "must be i/k with 0 <= i < k, e.g. 0/4");
+        let (i, k) = text.split_once('/').ok_or_else(bad)?;
+        let (index, count) = (i.trim().parse().map_err(|_| bad())?, k.trim().parse().map_err(|_| bad())?);
+        if count == 0 || index >= count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
+
+    /// The blocks this shard owns out of `blocks`: a contiguous range, the shards together
+    /// covering every block once.
+    pub fn blocks(&self, blocks: u64) -> Range<u64> {
+        let share = |i: u64| (u128::from(i) * u128::from(blocks) / u128::from(self.count)) as u64;
+        share(self.index)..share(self.index + 1)
+    }
+}
+
+/// The statistics one shard computed: per distribution, one [`BlockStats`] per owned block.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ShardOutput {
+    /// Trials per distribution in the whole run.
+    pub trials: u64,
+    /// Which shard.
+    pub shard: Shard,
+    /// First block this shard owns.
+    pub first_block: u64,
+    /// Worker threads used.
+    pub threads: usize,
+    /// Wall-clock seconds of this shard.
+    pub wall_s: f64,
+    /// `blocks[d][b]`: distribution d, the shard's b-th block.
+    pub blocks: Vec<Vec<BlockStats>>,
+}
+
 /// Runs every distribution of the experiment.
 pub fn run(exp: &Experiment, opts: &RunOptions) -> Result<RunOutput> {
+    let shard = run_shard(exp, opts, Shard::ALL)?;
+    fold(exp, std::slice::from_ref(&shard))
+}
+
+/// Trial count of a run: the option if given, else the experiment's.
+fn trial_count(exp: &Experiment, opts: &RunOptions) -> Result<u64> {
     let trials = opts.trials.unwrap_or(exp.file.trials);
     if trials < 4 {
         return Err(Error::param("trials", trials, "must be at least 4 (spec §7)"));
     }
+    Ok(trials)
+}
+
+/// Runs one shard's blocks of every distribution.
+pub fn run_shard(exp: &Experiment, opts: &RunOptions, shard: Shard) -> Result<ShardOutput> {
+    let trials = trial_count(exp, opts)?;
+    let blocks = shard.blocks(trials.div_ceil(BLOCK_TRIALS));
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads.unwrap_or(0))
         .build()
         .map_err(|e| Error::param("threads", format!("{:?}", opts.threads), e.to_string()))?;
+    let shard_trials = (blocks.end * BLOCK_TRIALS).min(trials) - (blocks.start * BLOCK_TRIALS).min(trials);
     let bar = if opts.progress {
-        let bar = ProgressBar::new(trials * exp.distributions.len() as u64);
+        let bar = ProgressBar::new(shard_trials * exp.distributions.len() as u64);
         if let Ok(style) = ProgressStyle::with_template(
             "{spinner} {msg:<18} [{bar:30}] {pos}/{len} trials ({eta} left)",
         ) {
@@ -166,20 +241,88 @@ pub fn run(exp: &Experiment, opts: &RunOptions) -> Result<RunOutput> {
         ProgressBar::hidden()
     };
     let start = Instant::now();
-    let dists = pool.install(|| {
+    let per_dist = pool.install(|| {
         exp.distributions
             .iter()
             .map(|d| {
                 bar.set_message(d.label.clone());
-                run_distribution(exp, d, trials, &bar)
+                run_blocks(exp, d, trials, blocks.clone(), &bar)
             })
             .collect::<Result<Vec<_>>>()
     })?;
     bar.finish_and_clear();
-    Ok(RunOutput {
+    Ok(ShardOutput {
         trials,
+        shard,
+        first_block: blocks.start,
         threads: pool.current_num_threads(),
         wall_s: start.elapsed().as_secs_f64(),
+        blocks: per_dist,
+    })
+}
+
+/// Folds shards (every block exactly once, any order given) into the run's results, block by
+/// block in block order: the same bits as a single run.
+pub fn fold(exp: &Experiment, shards: &[ShardOutput]) -> Result<RunOutput> {
+    let first = shards
+        .first()
+        .ok_or_else(|| Error::param("shards", "[]", "need at least one shard"))?;
+    let trials = first.trials;
+    let total_blocks = trials.div_ceil(BLOCK_TRIALS);
+    let mut ordered: Vec<&ShardOutput> = shards.iter().collect();
+    ordered.sort_by_key(|s| s.first_block);
+    let mut next = 0;
+    for s in &ordered {
+        let owned = s.blocks.first().map_or(0, |b| b.len() as u64);
+        if s.trials != trials || s.blocks.len() != exp.distributions.len() || s.first_block != next {
+            return Err(Error::param(
+                "shards",
+                format!("{}/{}", s.shard.index, s.shard.count),
+                "does not fit the others (trials, distributions or block range differ)",
+            ));
+        }
+        next += owned;
+    }
+    if next != total_blocks {
+        return Err(Error::param(
+            "shards",
+            format!("{next} of {total_blocks} blocks"),
+            "do not cover the run",
+        ));
+    }
+    let mut dists = Vec::with_capacity(exp.distributions.len());
+    for (i, d) in exp.distributions.iter().enumerate() {
+        let template = empty_cells(exp, d);
+        let mut total = BlockStats::empty(&template, exp.estimators.len());
+        for s in &ordered {
+            for b in &s.blocks[i] {
+                if b.cells.len() != template.len() {
+                    return Err(Error::param(
+                        "shards",
+                        format!("{}/{}", s.shard.index, s.shard.count),
+                        "has a different number of cells than the experiment",
+                    ));
+                }
+                total.merge(b);
+            }
+        }
+        dists.push(DistResult {
+            label: d.label.clone(),
+            law: d.dist.to_string(),
+            mu: d.dist.mean(),
+            variance: d.dist.variance(),
+            cells: total.cells,
+            estimator_nanos: total.estimator_nanos,
+            generate_nanos: total.generate_nanos,
+            samples: trials * exp.max_n() as u64,
+            state_bytes_max: total.state_bytes_max,
+            state_bytes_sum: total.state_bytes_sum,
+        });
+    }
+    Ok(RunOutput {
+        trials,
+        threads: shards.iter().map(|s| s.threads).max().unwrap_or(1),
+        wall_s: shards.iter().map(|s| s.wall_s).sum(),
         dists,
     })
 }
@@ -196,19 +339,22 @@ fn empty_cells(exp: &Experiment, d: &Distribution) -> Vec<CellAccumulator> {
     cells
 }
 
-fn run_distribution(
+/// The given blocks of one distribution, each folded chunk by chunk in chunk order.
+fn run_blocks(
     exp: &Experiment,
     d: &Distribution,
     trials: u64,
+    blocks: Range<u64>,
     bar: &ProgressBar,
-) -> Result<DistResult> {
+) -> Result<Vec<BlockStats>> {
     let template = empty_cells(exp, d);
-    let mut total = ChunkResult::empty(&template, exp.estimators.len());
-    let chunks = trials.div_ceil(CHUNK_TRIALS);
-    let mut wave_start = 0;
-    while wave_start < chunks {
-        let wave_end = (wave_start + BLOCK_CHUNKS).min(chunks);
-        let results = (wave_start..wave_end)
+    let mut out = Vec::with_capacity((blocks.end - blocks.start) as usize);
+    let mut wave = blocks.start;
+    while wave < blocks.end {
+        let wave_end = (wave + WAVE_BLOCKS).min(blocks.end);
+        let chunks = wave * BLOCK_CHUNKS..(wave_end * BLOCK_CHUNKS).min(trials.div_ceil(CHUNK_TRIALS));
+        let results = chunks
+            .clone()
             .into_par_iter()
             .map(|c| {
                 let range = c * CHUNK_TRIALS..((c + 1) * CHUNK_TRIALS).min(trials);
@@ -217,27 +363,16 @@ fn run_distribution(
                 r
             })
             .collect::<Result<Vec<_>>>()?;
-        // A block is folded chunk by chunk, then the total block by block: a fixed merge tree,
-        // so a shard that owns whole blocks can be merged into the same bits.
-        let mut block = ChunkResult::empty(&template, exp.estimators.len());
-        for r in &results {
-            block.merge(r);
+        for block in results.chunks(BLOCK_CHUNKS as usize) {
+            let mut stats = BlockStats::empty(&template, exp.estimators.len());
+            for r in block {
+                stats.merge(r);
+            }
+            out.push(stats);
         }
-        total.merge(&block);
-        wave_start = wave_end;
+        wave = wave_end;
     }
-    Ok(DistResult {
-        label: d.label.clone(),
-        law: d.dist.to_string(),
-        mu: d.dist.mean(),
-        variance: d.dist.variance(),
-        cells: total.cells,
-        estimator_nanos: total.estimator_nanos,
-        generate_nanos: total.generate_nanos,
-        samples: trials * exp.max_n() as u64,
-        state_bytes_max: total.state_bytes_max,
-        state_bytes_sum: total.state_bytes_sum,
-    })
+    Ok(out)
 }
 
 fn run_chunk(
@@ -245,7 +380,7 @@ fn run_chunk(
     d: &Distribution,
     trials: Range<u64>,
     template: &[CellAccumulator],
-) -> Result<ChunkResult> {
+) -> Result<BlockStats> {
     let checkpoints = &exp.file.checkpoints;
     let (mu, tau) = (d.dist.mean(), exp.file.tau);
     let mut estimators: Vec<Box<dyn Estimator>> = exp
@@ -253,7 +388,7 @@ fn run_chunk(
         .iter()
         .map(|s| s.build())
         .collect::<Result<_>>()?;
-    let mut out = ChunkResult::empty(template, estimators.len());
+    let mut out = BlockStats::empty(template, estimators.len());
     let mut samples = vec![0.0; exp.max_n()];
     let mut mean_estimates = vec![0.0; checkpoints.len()];
     let mut outlier = vec![false; checkpoints.len()];

@@ -60,16 +60,19 @@ mod tests {
     }
 }
 
-/// Writes `results.csv`, `summary.md`, `checks.json` and `manifest.json` into `dir`, each
-/// atomically. Returns the rows written (plots read them back from the CSV).
+/// Writes `results.csv`, `speed.csv`, `summary.md`, `checks.json` and `manifest.json` into
+/// `dir`, each atomically. Returns the rows of both CSVs (what the plots read).
 pub fn write_tables(
     dir: &Path,
     exp: &crate::harness::Experiment,
     out: &crate::harness::RunOutput,
     checks: &[crate::harness::CheckResult],
 ) -> Result<Vec<tables::Row>> {
-    let rows = tables::rows(exp, out);
+    let mut rows = tables::rows(exp, out);
     write_atomic(&dir.join("results.csv"), &tables::results_csv(&rows)?)?;
+    let speed = tables::speed_rows(exp, out);
+    write_atomic(&dir.join("speed.csv"), &tables::results_csv(&speed)?)?;
+    rows.extend(speed);
     write_atomic(
         &dir.join("summary.md"),
         tables::summary_md(exp, out, checks).as_bytes(),

@@ -32,7 +32,8 @@ fn infinite_variance(spec: &crate::estimators::EstimatorSpec, variance: Option<f
     matches!(spec, crate::estimators::EstimatorSpec::Mean) && variance.is_none()
 }
 
-/// Every metric of every cell, plus `ns_per_sample` and state sizes at the largest n.
+/// Every metric of every cell, plus state sizes at the largest n. Nothing here depends on
+/// timing or thread count, so a run's `results.csv` is byte-identical however it was split.
 pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
     let cps = &exp.file.checkpoints;
     let mut rows = Vec::new();
@@ -83,7 +84,6 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
                     ci_high: None,
                 });
             };
-            push_bare("ns_per_sample", d.ns_per_sample(e));
             push_bare("state_bytes_max", d.state_bytes_max[e] as f64);
             push_bare("state_bytes_mean", d.state_bytes_sum[e] as f64 / out.trials as f64);
         }
@@ -91,7 +91,36 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
     rows
 }
 
-/// `results.csv` text.
+/// Measured costs at the largest n (`speed.csv`): per estimator `ns_per_sample` (push and
+/// estimate, one thread), and per distribution `generate_ns_per_sample` under the estimator
+/// name `(generator)`.
+pub fn speed_rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
+    let n = exp.max_n();
+    let row = |d: &str, estimator: String, metric: &str, value: f64| Row {
+        distribution: d.to_string(),
+        estimator,
+        n,
+        metric: metric.to_string(),
+        value,
+        ci_low: None,
+        ci_high: None,
+    };
+    let mut rows = Vec::new();
+    for d in &out.dists {
+        for (e, spec) in exp.estimators.iter().enumerate() {
+            rows.push(row(&d.label, spec.to_string(), "ns_per_sample", d.ns_per_sample(e)));
+        }
+        rows.push(row(
+            &d.label,
+            "(generator)".to_string(),
+            "generate_ns_per_sample",
+            d.generate_ns_per_sample(),
+        ));
+    }
+    rows
+}
+
+/// CSV text of tidy rows.
 pub fn results_csv(rows: &[Row]) -> Result<Vec<u8>> {
     let mut w = csv::Writer::from_writer(Vec::new());
     for r in rows {

@@ -120,12 +120,15 @@ pub(super) struct Adr {
     pub(super) modes: Vec<PajotMode>,
     /// The acceptance bound (log units), `-inf` until an extended mode exists.
     pub(super) m: f64,
+    /// Index of the mode the last sample fell in (a guess: checked before use).
+    pub(super) hint: usize,
 }
 
 impl Adr {
     pub(super) const NEW: Adr = Adr {
         modes: Vec::new(),
         m: f64::NEG_INFINITY,
+        hint: 0,
     };
 
     /// Heap bytes held by the modes.
@@ -165,10 +168,18 @@ impl Adr {
     /// After learning, adds a non-black `l` to the representation (spec §6.3). Returns whether
     /// `m` changed.
     pub(super) fn update(&mut self, l: f64) -> bool {
+        // Most samples fall in the mode the previous one fell in: try it before searching.
+        if let Some(md) = self.modes.get_mut(self.hint) {
+            if md.is_extended() && md.lo <= l && l <= md.hi {
+                md.count += 1;
+                return false;
+            }
+        }
         let i = self.modes.partition_point(|md| md.hi < l);
         if let Some(md) = self.modes.get_mut(i) {
             if md.is_extended() && md.lo <= l {
                 md.count += 1;
+                self.hint = i;
                 return false;
             }
         }

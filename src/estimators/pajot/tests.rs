@@ -258,7 +258,7 @@ fn adr_implicit_point_set_matches_materialised() {
         }
         let adr = Adr {
             modes: modes.clone(),
-            m: f64::NEG_INFINITY,
+            ..Adr::NEW
         };
         // Skip near ties of the literal computation.
         let mut xs: Vec<f64> = modes
@@ -305,6 +305,7 @@ fn adr_merge_absorbs_a_mode_it_does_not_overlap() {
     let mut adr = Adr {
         modes: vec![dense, wide],
         m: 7.61,
+        ..Adr::NEW
     };
     let l = 0.32;
     assert_eq!(adr.overlapped_naive(l, 0), Some((0, 1)));
@@ -339,6 +340,7 @@ fn adr_update_inside_an_extended_mode_only_counts() {
             count: 3,
         }],
         m: 1.0,
+        ..Adr::NEW
     };
     for l in [0.0, 0.5, 1.0] {
         assert!(!adr.update(l));
@@ -351,7 +353,7 @@ fn adr_update_inside_an_extended_mode_only_counts() {
             hi: 2.0,
             count: 1,
         }],
-        m: f64::NEG_INFINITY,
+        ..Adr::NEW
     };
     assert!(adr.update(2.0));
     assert_eq!(adr.m, 2.0);

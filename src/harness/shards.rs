@@ -1,0 +1,158 @@
+//! Shard files: one shard's mergeable statistics plus what it was run from, so `merge` can
+//! refuse a missing, duplicated or mismatched shard by name before combining anything.
+
+use super::experiment::Experiment;
+use super::runner::{self, RunOutput, ShardOutput};
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Version of the shard file layout.
+const FORMAT: u32 = 1;
+
+/// One shard on disk.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ShardFile {
+    /// Layout version.
+    pub format: u32,
+    /// `fireflies` version that wrote it (statistics of different versions do not mix).
+    pub crate_version: String,
+    /// The experiment's TOML text, so the merge rebuilds exactly the same experiment.
+    pub experiment_toml: String,
+    /// The experiment's name.
+    pub experiment: String,
+    /// Its seed (also inside the TOML; repeated for error messages).
+    pub seed: u64,
+    /// The statistics.
+    pub output: ShardOutput,
+}
+
+impl ShardFile {
+    /// File name of shard `i` of `k`.
+    pub fn file_name(index: u64, count: u64) -> String {
+        format!("shard-{index}-of-{count}.json")
+    }
+
+    /// Wraps a shard's output.
+    pub fn new(exp: &Experiment, output: ShardOutput) -> Self {
+        ShardFile {
+            format: FORMAT,
+            crate_version: env!("CARGO_PKG_VERSION").to_string(),
+            experiment_toml: exp.source_toml.clone(),
+            experiment: exp.name.clone(),
+            seed: exp.file.seed,
+            output,
+        }
+    }
+
+    /// Reads one shard file.
+    pub fn read(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path.display(), &e))?;
+        serde_json::from_str(&text).map_err(|e| Error::Io {
+            path: path.display().to_string(),
+            message: format!("not a fireflies shard file: {e}"),
+        })
+    }
+}
+
+/// Every `shard-*-of-*.json` in the given directories (or the files themselves), sorted.
+pub fn find_shard_files(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for input in inputs {
+        if input.is_file() {
+            files.push(input.clone());
+            continue;
+        }
+        let entries = std::fs::read_dir(input).map_err(|e| Error::io(input.display(), &e))?;
+        for entry in entries {
+            let path = entry.map_err(|e| Error::io(input.display(), &e))?.path();
+            let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+            if name.is_some_and(|n| n.starts_with("shard-") && n.ends_with(".json")) {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    if files.is_empty() {
+        return Err(Error::param(
+            "shards",
+            format!("{inputs:?}"),
+            "no shard-*-of-*.json files found",
+        ));
+    }
+    Ok(files)
+}
+
+/// Checks that the shards are exactly 0..k of one run of one experiment with one version, then
+/// folds them. Returns the experiment and the merged output.
+pub fn merge(files: &[PathBuf]) -> Result<(Experiment, RunOutput)> {
+    let shards = files
+        .iter()
+        .map(|f| ShardFile::read(f).map(|s| (f, s)))
+        .collect::<Result<Vec<_>>>()?;
+    let (first_path, first) = &shards[0];
+    let mismatch = |path: &Path, what: &str, here: String, there: String| Error::Io {
+        path: path.display().to_string(),
+        message: format!(
+            "mismatched shard: {what} is {here} here but {there} in {}",
+            first_path.display()
+        ),
+    };
+    let count = first.output.shard.count;
+    let mut seen: Vec<Option<&PathBuf>> = vec![None; count as usize];
+    for (path, s) in &shards {
+        if s.format != first.format {
+            return Err(mismatch(path, "format", s.format.to_string(), first.format.to_string()));
+        }
+        if s.crate_version != first.crate_version {
+            return Err(mismatch(path, "version", s.crate_version.clone(), first.crate_version.clone()));
+        }
+        if s.experiment_toml != first.experiment_toml {
+            return Err(mismatch(
+                path,
+                "the experiment file",
+                format!("'{}'", s.experiment),
+                format!("a different '{}'", first.experiment),
+            ));
+        }
+        if s.seed != first.seed || s.output.trials != first.output.trials {
+            return Err(mismatch(
+                path,
+                "seed/trials",
+                format!("{}/{}", s.seed, s.output.trials),
+                format!("{}/{}", first.seed, first.output.trials),
+            ));
+        }
+        if s.output.shard.count != count {
+            return Err(mismatch(
+                path,
+                "the shard count",
+                s.output.shard.count.to_string(),
+                count.to_string(),
+            ));
+        }
+        let slot = &mut seen[s.output.shard.index as usize];
+        if let Some(other) = slot {
+            return Err(Error::Io {
+                path: path.display().to_string(),
+                message: format!(
+                    "duplicated shard {}/{count}: also in {}",
+                    s.output.shard.index,
+                    other.display()
+                ),
+            });
+        }
+        *slot = Some(path);
+    }
+    if let Some(missing) = seen.iter().position(Option::is_none) {
+        return Err(Error::param(
+            "shards",
+            format!("{missing}/{count}"),
+            format!("is missing ({} of {count} shard files given)", shards.len()),
+        ));
+    }
+    let exp = Experiment::from_toml(&first.experiment_toml, "shard experiment", &first.experiment)?;
+    let outputs: Vec<ShardOutput> = shards.into_iter().map(|(_, s)| s.output).collect();
+    let merged = runner::fold(&exp, &outputs)?;
+    Ok((exp, merged))
+}
