@@ -108,6 +108,7 @@ fn runner(c: &mut Criterion) {
         trials: Some(TRIALS),
         threads: Some(THREADS),
         progress: false,
+        ..RunOptions::default()
     };
 
     let mut group = c.benchmark_group("runner");

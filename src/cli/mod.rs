@@ -1,6 +1,7 @@
 //! Subcommands of the `fireflies` binary; each lives in its own module.
 
 mod eval;
+mod gate;
 mod merge;
 mod run;
 
@@ -22,6 +23,8 @@ enum Command {
     Eval(eval::EvalArgs),
     /// Run an experiment (default: the embedded one) and write its report.
     Run(run::RunArgs),
+    /// Compare a run with a committed baseline; exit 1 on a regression.
+    Gate(gate::GateArgs),
     /// Merge shard files of one run into its report.
     Merge(merge::MergeArgs),
 }
@@ -32,6 +35,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Eval(args)) => eval::run(&args),
         Some(Command::Run(args)) => run::run(&args),
         Some(Command::Merge(args)) => merge::run(&args),
+        Some(Command::Gate(args)) => gate::run(&args),
         None => run::run(&run::RunArgs::default()),
     }
 }

@@ -22,6 +22,9 @@ pub struct RunArgs {
     /// Worker threads (default: one per core). Results do not depend on it.
     #[arg(long)]
     threads: Option<usize>,
+    /// Overrides the experiment's seed (not with --shard: shards must share the file's seed).
+    #[arg(long, conflicts_with = "shard")]
+    seed: Option<u64>,
     /// Run only shard i of k (`i/k`, 0-based) and write its mergeable statistics to
     /// `DIR/shard-i-of-k.json`; `fireflies merge` combines the shards into the report.
     #[arg(long, value_name = "i/k")]
@@ -29,10 +32,7 @@ pub struct RunArgs {
 }
 
 pub fn run(args: &RunArgs) -> Result<ExitCode> {
-    let exp = match &args.experiment {
-        Some(path) => Experiment::load(path)?,
-        None => Experiment::default_experiment()?,
-    };
+    let exp = load(args.experiment.as_deref(), args.seed)?;
     let dir = args
         .out
         .clone()
@@ -43,6 +43,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         trials: args.trials,
         threads: args.threads,
         progress: std::io::stderr().is_terminal(),
+        build: None,
     };
     eprintln!(
         "running {} ({} distributions x {} estimators, {} trials, n up to {})",
@@ -64,6 +65,18 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     }
     let out = harness::run(&exp, &opts)?;
     report_run(&dir, &exp, &out)
+}
+
+/// The experiment at `path` (or the embedded default), with its seed optionally replaced.
+pub fn load(path: Option<&std::path::Path>, seed: Option<u64>) -> Result<Experiment> {
+    let mut exp = match path {
+        Some(path) => Experiment::load(path)?,
+        None => Experiment::default_experiment()?,
+    };
+    if let Some(seed) = seed {
+        exp.file.seed = seed;
+    }
+    Ok(exp)
 }
 
 /// Checks, tables and plots of a finished run; exit code 1 when a gating check failed.

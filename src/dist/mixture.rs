@@ -14,9 +14,10 @@ use crate::error::{Error, Result};
 ///
 /// Weights are normalised: any finite, non-negative weights with a positive finite sum are
 /// accepted and divided by their sum (so `[9, 1]` means 90% / 10%; `Display` shows the
-/// normalised values). Weights that already sum to 1 within 1e-14 are kept exactly as written,
-/// so that `0.45, 0.54955, 0.00045` stays readable. Zero-weight components are dropped, and nested mixtures are flattened
-/// into their parent, so every stored component is a single law.
+/// normalised values). Weights that already sum to 1 within 1e-14 are kept exactly as
+/// written, so that `0.45, 0.54955, 0.00045` stays readable. Zero-weight components are
+/// dropped, and nested mixtures are flattened into their parent, so every stored component is
+/// a single law.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Mixture {
     components: Vec<Dist>,

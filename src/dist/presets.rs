@@ -5,17 +5,21 @@
 //! radiance times the albedo) and a *power law* (pixels lit through a mirror: a bounded Pareto
 //! tail). Every preset is scaled to mean 1, so a bias reads directly as a relative bias;
 //! [`Dist::mean`] reports the exact mean of the parameters as stored, which is 1 to within a
-//! few ulps where a parameter is derived (the table gives derived values to 6 digits).
+//! few ulps where a parameter is derived to hit it.
 //!
-//! | preset              | law                                                                  | mean | variance |
-//! |---------------------|----------------------------------------------------------------------|------|----------|
-//! | `diffuse`           | lognormal(mu = -0.125, sigma = 0.5)                                  | 1    | 0.284025 |
-//! | `glossy`            | lognormal(mu = -1.125, sigma = 1.5)                                  | 1    | 8.48774  |
-//! | `caustic`           | 0.45 point(0) + 0.54955 lognormal(mu = -1.98518, sigma = 0.75) + 0.00045 point(2000) | 1 | 1799.03 |
-//! | `mirror-lit`        | 0.99 point(0) + 0.01 truncated-pareto(scale = 19.8053, shape = 1.2, upper = 10^4 scale) | 1 | 9318.41 |
-//! | `firefly`           | 0.99999 lognormal(mu = -0.616524, sigma = 1) + 0.00001 pareto(scale = 1000, shape = 1.1) | 1 | infinite |
-//! | `black-speckle`     | 0.9 point(0) + 0.1 lognormal(mu = ln 10 - 0.125, sigma = 0.5)        | 1    | 11.8403  |
-//! | `infinite-variance` | pareto(scale = 1/3, shape = 1.5)                                     | 1    | infinite |
+//! Laws are written `lognormal(mu, sigma)`, `pareto(scale, shape)`,
+//! `truncated-pareto(scale, shape, upper)` and `point(value)`; derived values to 6 digits:
+//!
+//! | preset              | law                                                         | variance |
+//! |---------------------|-------------------------------------------------------------|----------|
+//! | `diffuse`           | lognormal(-0.125, 0.5)                                      | 0.284025 |
+//! | `glossy`            | lognormal(-1.125, 1.5)                                      | 8.48774  |
+//! | `caustic`           | 0.45 point(0) + 0.54955 lognormal(-1.98518, 0.75)           | 1799.03  |
+//! |                     | + 0.00045 point(2000)                                       |          |
+//! | `mirror-lit`        | 0.99 point(0) + 0.01 truncated-pareto(19.8053, 1.2, 198053) | 9318.41  |
+//! | `firefly`           | 0.99999 lognormal(-0.616524, 1) + 0.00001 pareto(1000, 1.1) | infinite |
+//! | `black-speckle`     | 0.9 point(0) + 0.1 lognormal(2.17759, 0.5)                  | 11.8403  |
+//! | `infinite-variance` | pareto(1/3, 1.5)                                            | infinite |
 
 use std::fmt;
 use std::str::FromStr;

@@ -106,6 +106,9 @@ pub struct ExperimentFile {
     /// Checks.
     #[serde(default)]
     pub checks: ChecksConfig,
+    /// Regression-gate margins (used by `fireflies gate`).
+    #[serde(default)]
+    pub gate: super::gate::GateConfig,
 }
 
 fn default_tau() -> f64 {

@@ -188,6 +188,25 @@ impl LogHistogram {
     }
 }
 
+/// One row of a tidy results table (`results.csv`, `speed.csv`, gate baselines).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    /// Distribution label.
+    pub distribution: String,
+    /// Estimator spec string.
+    pub estimator: String,
+    /// Sample count.
+    pub n: usize,
+    /// Metric name.
+    pub metric: String,
+    /// Point value.
+    pub value: f64,
+    /// Lower bound of the 95% interval (empty: none meaningful).
+    pub ci_low: Option<f64>,
+    /// Upper bound of the 95% interval.
+    pub ci_high: Option<f64>,
+}
+
 /// A point estimate with a 95% confidence interval (`None` bounds where none is meaningful).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Interval {

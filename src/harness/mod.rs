@@ -3,6 +3,7 @@
 
 pub mod checks;
 pub mod experiment;
+pub mod gate;
 pub mod metrics;
 pub mod runner;
 pub mod shards;

@@ -12,7 +12,7 @@ use super::checks;
 use super::experiment::{Distribution, Experiment};
 use super::metrics::{CellAccumulator, Observation};
 use crate::error::{Error, Result};
-use crate::estimators::{Estimator, Mean, validate_samples};
+use crate::estimators::{Estimator, EstimatorSpec, Mean, validate_samples};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -43,7 +43,13 @@ pub struct RunOptions {
     pub threads: Option<usize>,
     /// Show a progress bar on stderr (drawn only when stderr is a terminal).
     pub progress: bool,
+    /// Builds each estimator from its spec; `None` is [`EstimatorSpec::build`]. Tests use it to
+    /// run a deliberately broken variant through the real harness.
+    pub build: Option<BuildFn>,
 }
+
+/// How the runner turns a spec into an estimator.
+pub type BuildFn = fn(&EstimatorSpec) -> Result<Box<dyn Estimator>>;
 
 /// Results for one distribution.
 #[derive(Debug, Clone)]
@@ -246,7 +252,8 @@ pub fn run_shard(exp: &Experiment, opts: &RunOptions, shard: Shard) -> Result<Sh
             .iter()
             .map(|d| {
                 bar.set_message(d.label.clone());
-                run_blocks(exp, d, trials, blocks.clone(), &bar)
+                let build = opts.build.unwrap_or(EstimatorSpec::build);
+                run_blocks(exp, d, trials, blocks.clone(), build, &bar)
             })
             .collect::<Result<Vec<_>>>()
     })?;
@@ -345,6 +352,7 @@ fn run_blocks(
     d: &Distribution,
     trials: u64,
     blocks: Range<u64>,
+    build: BuildFn,
     bar: &ProgressBar,
 ) -> Result<Vec<BlockStats>> {
     let template = empty_cells(exp, d);
@@ -358,7 +366,7 @@ fn run_blocks(
             .into_par_iter()
             .map(|c| {
                 let range = c * CHUNK_TRIALS..((c + 1) * CHUNK_TRIALS).min(trials);
-                let r = run_chunk(exp, d, range.clone(), &template);
+                let r = run_chunk(exp, d, range.clone(), &template, build);
                 bar.inc(range.end - range.start);
                 r
             })
@@ -380,14 +388,12 @@ fn run_chunk(
     d: &Distribution,
     trials: Range<u64>,
     template: &[CellAccumulator],
+    build: BuildFn,
 ) -> Result<BlockStats> {
     let checkpoints = &exp.file.checkpoints;
     let (mu, tau) = (d.dist.mean(), exp.file.tau);
-    let mut estimators: Vec<Box<dyn Estimator>> = exp
-        .estimators
-        .iter()
-        .map(|s| s.build())
-        .collect::<Result<_>>()?;
+    let mut estimators: Vec<Box<dyn Estimator>> =
+        exp.estimators.iter().map(build).collect::<Result<_>>()?;
     let mut out = BlockStats::empty(template, estimators.len());
     let mut samples = vec![0.0; exp.max_n()];
     let mut mean_estimates = vec![0.0; checkpoints.len()];

@@ -7,24 +7,7 @@ use crate::harness::{CheckResult, Experiment, RunOutput};
 use serde::Serialize;
 use std::fmt::Write as _;
 
-/// One row of `results.csv`.
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
-pub struct Row {
-    /// Distribution label.
-    pub distribution: String,
-    /// Estimator spec string.
-    pub estimator: String,
-    /// Sample count.
-    pub n: usize,
-    /// Metric name.
-    pub metric: String,
-    /// Point value.
-    pub value: f64,
-    /// Lower bound of the 95% interval (empty: none meaningful).
-    pub ci_low: Option<f64>,
-    /// Upper bound of the 95% interval.
-    pub ci_high: Option<f64>,
-}
+pub use crate::harness::metrics::Row;
 
 /// Whether an estimator is the plain mean on a law of infinite variance, where variance and
 /// MSE intervals mean nothing.
@@ -56,6 +39,16 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
                     });
                 };
                 push("bias", m.bias, unbounded);
+                let rel = |x: Option<f64>| x.map(|v| v / d.mu);
+                push(
+                    "relative_bias",
+                    Interval {
+                        value: m.bias.value / d.mu,
+                        low: rel(m.bias.low),
+                        high: rel(m.bias.high),
+                    },
+                    unbounded,
+                );
                 push("variance", m.variance, unbounded);
                 push("mse", m.mse, unbounded);
                 push("relative_rmse", m.relative_rmse, unbounded);
