@@ -57,7 +57,11 @@ fn bank(c: &mut Criterion) {
     });
     let mut mean_only = Bank::new(&specs[..1]).expect("valid bank");
     group.bench_function("mean-only", |b| {
-        b.iter(|| mean_only.push_slice(black_box(&samples)).expect("valid samples"))
+        b.iter(|| {
+            mean_only
+                .push_slice(black_box(&samples))
+                .expect("valid samples")
+        })
     });
     group.finish();
 }

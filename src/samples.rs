@@ -20,7 +20,9 @@ pub fn for_each_block(
     let (mut line_no, mut index) = (0usize, 0u64);
     loop {
         line.clear();
-        let read = reader.read_line(&mut line).map_err(|e| Error::io(name, &e))?;
+        let read = reader
+            .read_line(&mut line)
+            .map_err(|e| Error::io(name, &e))?;
         if read == 0 {
             break;
         }

@@ -21,7 +21,11 @@ fn write(path: &Path, text: &str) -> PathBuf {
 }
 
 fn json_lines(out: &Output) -> Vec<serde_json::Value> {
-    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     String::from_utf8(out.stdout.clone())
         .unwrap()
         .lines()
@@ -36,7 +40,15 @@ fn eval_prints_one_json_object_per_estimator_in_order() {
     let dir = scratch("eval");
     let file = write(&dir.join("s.txt"), RUNNING_EXAMPLE);
     let out = bin()
-        .args(["eval", "--estimator", "mean", "-e", "gmon:M=5", "-e", "jung:sigma_image=40"])
+        .args([
+            "eval",
+            "--estimator",
+            "mean",
+            "-e",
+            "gmon:M=5",
+            "-e",
+            "jung:sigma_image=40",
+        ])
         .arg(&file)
         .output()
         .unwrap();
@@ -52,12 +64,20 @@ fn eval_prints_one_json_object_per_estimator_in_order() {
     assert_eq!(lines[2]["estimate"].as_f64().unwrap(), 2.8);
     // Keys keep the documented order: estimator, n, estimate, then extras.
     let text = String::from_utf8(out.stdout).unwrap();
-    assert!(text.lines().next().unwrap().starts_with(r#"{"estimator":"mean","n":7,"estimate":"#));
+    assert!(
+        text.lines()
+            .next()
+            .unwrap()
+            .starts_with(r#"{"estimator":"mean","n":7,"estimate":"#)
+    );
 }
 
 #[test]
 fn eval_reads_stdin_when_no_file_or_dash() {
-    for args in [vec!["eval", "-e", "mon:M=5"], vec!["eval", "-e", "mon:M=5", "-"]] {
+    for args in [
+        vec!["eval", "-e", "mon:M=5"],
+        vec!["eval", "-e", "mon:M=5", "-"],
+    ] {
         let mut child = bin()
             .args(&args)
             .stdin(Stdio::piped())
@@ -79,24 +99,45 @@ fn eval_reads_stdin_when_no_file_or_dash() {
 fn eval_input_errors_exit_2_and_name_the_problem() {
     let dir = scratch("eval-errors");
     let cases = [
-        ("bad.txt", "1 2\n3 x4\n", "mean", "bad.txt:2: malformed number 'x4'"),
-        ("neg.txt", "1\n-2\n", "mean", "neg.txt:2: invalid sample at index 1: -2"),
+        (
+            "bad.txt",
+            "1 2\n3 x4\n",
+            "mean",
+            "bad.txt:2: malformed number 'x4'",
+        ),
+        (
+            "neg.txt",
+            "1\n-2\n",
+            "mean",
+            "neg.txt:2: invalid sample at index 1: -2",
+        ),
         ("empty.txt", "\n  \n", "mean", "no samples"),
         ("ok.txt", "1", "median:M=3", "unknown estimator 'median'"),
         ("ok2.txt", "1", "mon:M=0", "M = 0"),
     ];
     for (name, text, spec, expected) in cases {
         let file = write(&dir.join(name), text);
-        let out = bin().args(["eval", "-e", spec]).arg(&file).output().unwrap();
+        let out = bin()
+            .args(["eval", "-e", spec])
+            .arg(&file)
+            .output()
+            .unwrap();
         assert_eq!(out.status.code(), Some(2), "{name}");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(expected), "{name}: {err}");
     }
-    let out = bin().args(["eval", "-e", "mean", "/nonexistent/x.txt"]).output().unwrap();
+    let out = bin()
+        .args(["eval", "-e", "mean", "/nonexistent/x.txt"])
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/x.txt"));
     let out = bin().args(["eval"]).output().unwrap();
-    assert_eq!(out.status.code(), Some(2), "missing --estimator is a usage error");
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "missing --estimator is a usage error"
+    );
 }
 
 #[test]
@@ -119,10 +160,18 @@ fn eval_block_evaluates_the_centre_with_its_neighbours() {
     assert_eq!(lines[1]["estimate"].as_f64().unwrap(), 363.2 / 7.0);
     // An empty file is a pixel outside the image; an empty centre is an error.
     write(&dir.join("p0.txt"), "");
-    let out = bin().args(["eval", "-e", "zirr", "--block"]).args(&files).output().unwrap();
+    let out = bin()
+        .args(["eval", "-e", "zirr", "--block"])
+        .args(&files)
+        .output()
+        .unwrap();
     assert!(out.status.success());
     write(&dir.join("p4.txt"), "");
-    let out = bin().args(["eval", "-e", "zirr", "--block"]).args(&files).output().unwrap();
+    let out = bin()
+        .args(["eval", "-e", "zirr", "--block"])
+        .args(&files)
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
 
@@ -156,7 +205,11 @@ fn run_writes_every_table_and_is_identical_across_thread_counts() {
             .arg(&out_dir)
             .output()
             .unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         for f in ["results.csv", "summary.md", "manifest.json", "checks.json"] {
             assert!(out_dir.join(f).metadata().unwrap().len() > 0, "{f}");
         }
@@ -181,7 +234,10 @@ fn run_writes_every_table_and_is_identical_across_thread_counts() {
 #[test]
 fn run_errors_name_the_line_and_the_path() {
     let dir = scratch("run-errors");
-    let exp = write(&dir.join("bad.toml"), &TINY.replace("trials = 600", "trials = 600\ntrails = 2"));
+    let exp = write(
+        &dir.join("bad.toml"),
+        &TINY.replace("trials = 600", "trials = 600\ntrails = 2"),
+    );
     let out = bin().arg("run").arg(&exp).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);

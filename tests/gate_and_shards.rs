@@ -93,13 +93,17 @@ fn a_two_percent_bias_fails_the_gate_and_only_where_it_was_injected() {
     let cmp = gate::compare(&baseline, &now, &exp.file.gate);
     let regressions: Vec<_> = cmp.iter().filter(|c| c.regression).collect();
     assert!(
-        regressions
-            .iter()
-            .any(|c| c.estimator == "mean" && c.metric == "relative_bias" && c.distribution == "diffuse"),
+        regressions.iter().any(|c| c.estimator == "mean"
+            && c.metric == "relative_bias"
+            && c.distribution == "diffuse"),
         "{}",
         gate::table(&cmp)
     );
-    assert!(regressions.iter().all(|c| c.estimator == "mean"), "{}", gate::table(&cmp));
+    assert!(
+        regressions.iter().all(|c| c.estimator == "mean"),
+        "{}",
+        gate::table(&cmp)
+    );
 }
 
 /// Each of the 20 gate runs has family-wise false-alarm probability at most 0.001 (Holm),
@@ -116,7 +120,11 @@ fn unchanged_estimators_pass_the_gate_for_twenty_seeds() {
         let now = rows(&experiment(seed), None);
         let cmp = gate::compare(&baseline, &now, &exp.file.gate);
         assert!(cmp.len() > 50);
-        assert!(!cmp.iter().any(|c| c.regression), "seed {seed}:\n{}", gate::table(&cmp));
+        assert!(
+            !cmp.iter().any(|c| c.regression),
+            "seed {seed}:\n{}",
+            gate::table(&cmp)
+        );
     }
 }
 
@@ -159,9 +167,14 @@ fn shards_merge_bit_identically_for_any_split_and_thread_count() {
         let dir = scratch(&format!("k{k}"));
         // Through files, as the cluster scripts do.
         for i in (0..k).rev() {
-            let out = runner::run_shard(&exp, &RunOptions::default(), Shard { index: i, count: k }).unwrap();
+            let out = runner::run_shard(&exp, &RunOptions::default(), Shard { index: i, count: k })
+                .unwrap();
             let path = dir.join(ShardFile::file_name(i, k));
-            report::write_atomic(&path, &serde_json::to_vec(&ShardFile::new(&exp, out)).unwrap()).unwrap();
+            report::write_atomic(
+                &path,
+                &serde_json::to_vec(&ShardFile::new(&exp, out)).unwrap(),
+            )
+            .unwrap();
         }
         let files = shards::find_shard_files(&[dir]).unwrap();
         let (merged_exp, merged) = shards::merge(&files).unwrap();
@@ -174,24 +187,49 @@ fn merge_refuses_missing_duplicated_and_mismatched_shards() {
     let exp = Experiment::from_toml(SHARDED, "sharded", "sharded").unwrap();
     let dir = scratch("refuse");
     let write = |exp: &Experiment, i: u64, k: u64, name: &str| {
-        let out = runner::run_shard(exp, &RunOptions { trials: Some(600), ..RunOptions::default() }, Shard { index: i, count: k }).unwrap();
+        let out = runner::run_shard(
+            exp,
+            &RunOptions {
+                trials: Some(600),
+                ..RunOptions::default()
+            },
+            Shard { index: i, count: k },
+        )
+        .unwrap();
         let path = dir.join(name);
-        report::write_atomic(&path, &serde_json::to_vec(&ShardFile::new(exp, out)).unwrap()).unwrap();
+        report::write_atomic(
+            &path,
+            &serde_json::to_vec(&ShardFile::new(exp, out)).unwrap(),
+        )
+        .unwrap();
         path
     };
     let s0 = write(&exp, 0, 3, "shard-0-of-3.json");
     let s1 = write(&exp, 1, 3, "shard-1-of-3.json");
-    let err = shards::merge(&[s0.clone(), s1.clone()]).unwrap_err().to_string();
+    let err = shards::merge(&[s0.clone(), s1.clone()])
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("2/3") && err.contains("missing"), "{err}");
     let dup = dir.join("copy.json");
     std::fs::copy(&s1, &dup).unwrap();
     let s2 = write(&exp, 2, 3, "shard-2-of-3.json");
-    let err = shards::merge(&[s0.clone(), s1.clone(), dup.clone(), s2.clone()]).unwrap_err().to_string();
-    assert!(err.contains("duplicated shard 1/3") && err.contains("copy.json"), "{err}");
-    let other = Experiment::from_toml(&SHARDED.replace("seed = 11", "seed = 12"), "x", "sharded").unwrap();
+    let err = shards::merge(&[s0.clone(), s1.clone(), dup.clone(), s2.clone()])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("duplicated shard 1/3") && err.contains("copy.json"),
+        "{err}"
+    );
+    let other =
+        Experiment::from_toml(&SHARDED.replace("seed = 11", "seed = 12"), "x", "sharded").unwrap();
     let alien = write(&other, 2, 3, "alien.json");
-    let err = shards::merge(&[s0.clone(), s1.clone(), alien]).unwrap_err().to_string();
-    assert!(err.contains("alien.json") && err.contains("mismatched"), "{err}");
+    let err = shards::merge(&[s0.clone(), s1.clone(), alien])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("alien.json") && err.contains("mismatched"),
+        "{err}"
+    );
     assert!(shards::merge(&[s0, s1, s2]).is_ok());
 }
 
@@ -213,15 +251,32 @@ fn shard_cli_round_trip_as_the_cluster_scripts_run_it() {
         assert!(st.success());
     }
     let merged = dir.join("merged");
-    let st = Command::new(bin).arg("merge").arg(&shard_dir).arg("--out").arg(&merged).status().unwrap();
+    let st = Command::new(bin)
+        .arg("merge")
+        .arg(&shard_dir)
+        .arg("--out")
+        .arg(&merged)
+        .status()
+        .unwrap();
     assert!(st.success());
     let single = dir.join("single");
-    let st = Command::new(bin).arg("run").arg(&exp_path).arg("--out").arg(&single).status().unwrap();
+    let st = Command::new(bin)
+        .arg("run")
+        .arg(&exp_path)
+        .arg("--out")
+        .arg(&single)
+        .status()
+        .unwrap();
     assert!(st.success());
     let a = std::fs::read(merged.join("results.csv")).unwrap();
     let b = std::fs::read(single.join("results.csv")).unwrap();
     assert_eq!(a, b);
     // A bad shard spec is a usage error.
-    let out = Command::new(bin).arg("run").arg(&exp_path).args(["--shard", "3/3"]).output().unwrap();
+    let out = Command::new(bin)
+        .arg("run")
+        .arg(&exp_path)
+        .args(["--shard", "3/3"])
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }

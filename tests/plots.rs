@@ -155,7 +155,10 @@ fn every_figure_is_written_as_png_and_svg() {
     assert_eq!(width("variance_mse"), 4 * 480);
     // The missing interval is said in the figure, not silently dropped.
     let bias_svg = std::fs::read_to_string(dir.join("bias.svg")).unwrap();
-    assert!(bias_svg.contains("No band for mean on infinite-variance"), "note missing");
+    assert!(
+        bias_svg.contains("No band for mean on infinite-variance"),
+        "note missing"
+    );
     // Writing again replaces the files in place.
     let again = write_plots(&dir, &synthetic()).unwrap();
     assert_eq!(again, written);

@@ -32,7 +32,10 @@ fn json_line(spec_text: &str, n: u64, estimate: f64, extras: &Extras) -> String 
     obj.insert("n".into(), n.into());
     obj.insert("estimate".into(), serde_json::json!(estimate));
     for (key, value) in extras {
-        obj.insert((*key).into(), serde_json::to_value(value).unwrap_or_default());
+        obj.insert(
+            (*key).into(),
+            serde_json::to_value(value).unwrap_or_default(),
+        );
     }
     serde_json::Value::Object(obj).to_string()
 }
@@ -72,8 +75,15 @@ pub fn run(args: &EvalArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn eval_stream(file: Option<&PathBuf>, texts: &[String], specs: &[EstimatorSpec]) -> Result<Vec<String>> {
-    let mut estimators = specs.iter().map(EstimatorSpec::build).collect::<Result<Vec<_>>>()?;
+fn eval_stream(
+    file: Option<&PathBuf>,
+    texts: &[String],
+    specs: &[EstimatorSpec],
+) -> Result<Vec<String>> {
+    let mut estimators = specs
+        .iter()
+        .map(EstimatorSpec::build)
+        .collect::<Result<Vec<_>>>()?;
     let n = feed(file, &mut estimators)?;
     if n == 0 {
         let name = file.map_or("-".to_string(), |p| p.display().to_string());
@@ -112,7 +122,10 @@ fn block_line<T: Estimator>(
         pixels.push((n > 0).then_some(e));
     }
     let Some(centre) = &pixels[4] else {
-        return Err(Error::EmptyStream(format!("centre pixel {}", files[4].display())));
+        return Err(Error::EmptyStream(format!(
+            "centre pixel {}",
+            files[4].display()
+        )));
     };
     let block: [Option<&T>; 9] = std::array::from_fn(|i| pixels[i].as_ref());
     let (estimate, extras) = block_estimate(&block)?;
@@ -125,14 +138,19 @@ fn eval_block(files: &[PathBuf], texts: &[String], specs: &[EstimatorSpec]) -> R
         .iter()
         .zip(texts)
         .map(|(spec, text)| match *spec {
-            EstimatorSpec::Zirr(p) => block_line(text, files, || Zirr::new(p), Zirr::block_estimate),
+            EstimatorSpec::Zirr(p) => {
+                block_line(text, files, || Zirr::new(p), Zirr::block_estimate)
+            }
             EstimatorSpec::ZirrRef(p) => {
                 block_line(text, files, || ZirrRef::new(p), ZirrRef::block_estimate)
             }
             _ => {
                 let mut e = spec.build()?;
                 if read_into(&mut *e, centre)? == 0 {
-                    return Err(Error::EmptyStream(format!("centre pixel {}", centre.display())));
+                    return Err(Error::EmptyStream(format!(
+                        "centre pixel {}",
+                        centre.display()
+                    )));
                 }
                 Ok(json_line(text, e.count(), e.estimate()?, &e.extras()))
             }

@@ -61,7 +61,11 @@ pub fn run(args: &GateArgs) -> Result<ExitCode> {
     let now = tables::read_results_csv(&results)?;
     if args.update {
         report::write_atomic(&args.baseline, &tables::results_csv(&now)?)?;
-        eprintln!("baseline {} updated from {}", args.baseline.display(), results.display());
+        eprintln!(
+            "baseline {} updated from {}",
+            args.baseline.display(),
+            results.display()
+        );
         return Ok(ExitCode::SUCCESS);
     }
     let baseline = tables::read_results_csv(&args.baseline)?;

@@ -3,7 +3,7 @@
 use clap::Args;
 use fireflies::harness::runner::{self, Shard};
 use fireflies::harness::shards::ShardFile;
-use fireflies::harness::{self, Experiment, RunOutput, RunOptions};
+use fireflies::harness::{self, Experiment, RunOptions, RunOutput};
 use fireflies::{Result, report};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -97,7 +97,11 @@ pub fn report_run(dir: &std::path::Path, exp: &Experiment, out: &RunOutput) -> R
     for c in &failed {
         eprintln!(
             "{} {} on {} / {} at n = {}: {} (observed {}, p = {:.3e})",
-            if c.gating { "FAILED" } else { "finding: violated" },
+            if c.gating {
+                "FAILED"
+            } else {
+                "finding: violated"
+            },
             c.check,
             c.distribution,
             c.estimator,

@@ -22,7 +22,9 @@ pub struct LogNormal {
 
 impl LogNormal {
     /// Checked constructor: `mu` finite, `sigma` finite and > 0 (a zero spread is a point
-    /// mass), and the mean and variance must be positive f64s (no overflow or underflow).
+    /// mass), and the mean must be a positive f64. The variance may over- or underflow at
+    /// extreme scales (mean near 1e300 or 1e-300); [`crate::dist::Dist::relative_variance`]
+    /// stays exact there.
     pub fn new(mu: f64, sigma: f64) -> Result<Self> {
         if !mu.is_finite() {
             return Err(Error::param("mu", mu, "must be finite"));
@@ -37,11 +39,11 @@ impl LogNormal {
         let s2 = sigma * sigma;
         let mean = (mu + 0.5 * s2).exp();
         let variance = s2.exp_m1() * (2.0 * mu + s2).exp();
-        if !(mean > 0.0 && variance > 0.0 && variance.is_finite()) {
+        if !(mean > 0.0 && mean.is_finite() && s2.exp_m1().is_finite()) {
             return Err(Error::param(
                 "mu",
                 mu,
-                format!("with sigma = {sigma} the mean or variance does not fit in a positive f64"),
+                format!("with sigma = {sigma} the mean does not fit in a positive f64"),
             ));
         }
         Ok(LogNormal {
@@ -67,9 +69,15 @@ impl LogNormal {
         self.mean
     }
 
-    /// Exact variance `expm1(sigma^2) exp(2 mu + sigma^2)`; always finite.
+    /// Exact variance `expm1(sigma^2) exp(2 mu + sigma^2)` (finite; it can overflow to `inf` or
+    /// underflow to 0 as an f64 at extreme scales).
     pub fn variance(&self) -> Option<f64> {
         Some(self.variance)
+    }
+
+    /// `Var / mean^2 = expm1(sigma^2)`: scale-free, exact at any scale.
+    pub fn relative_variance(&self) -> f64 {
+        (self.sigma * self.sigma).exp_m1()
     }
 
     fn standardise(&self, x: f64) -> f64 {

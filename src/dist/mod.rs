@@ -119,6 +119,36 @@ impl Dist {
         dispatch!(self, d => d.variance())
     }
 
+    /// `Var S / (E S)^2`, `None` when the variance is infinite. Scale-free, so exact where
+    /// the variance itself does not fit in an f64 (laws at scale 1e300 or 1e-300).
+    pub fn relative_variance(&self) -> Option<f64> {
+        match self {
+            Dist::LogNormal(d) => Some(d.relative_variance()),
+            Dist::PointMass(_) => Some(0.0),
+            Dist::Mixture(m) => {
+                let mu = m.mean();
+                let v = m.variance()?;
+                if v > 0.0 && v.is_finite() {
+                    return Some(v / mu / mu);
+                }
+                // The variance over- or underflowed: recombine scale-free component moments.
+                let mut second = 0.0;
+                for (&w, d) in m.weights().iter().zip(m.components()) {
+                    if w == 0.0 {
+                        continue;
+                    }
+                    let ratio = d.mean() / mu;
+                    second += w * ratio * ratio * (1.0 + d.relative_variance()?);
+                }
+                Some((second - 1.0).max(0.0))
+            }
+            Dist::Pareto(_) | Dist::TruncatedPareto(_) => {
+                let m = self.mean();
+                self.variance().map(|v| v / m / m)
+            }
+        }
+    }
+
     /// `P(S <= x)`.
     pub fn cdf(&self, x: f64) -> f64 {
         dispatch!(self, d => d.cdf(x))

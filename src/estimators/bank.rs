@@ -36,7 +36,10 @@ pub struct Bank {
 impl Bank {
     /// Builds one estimator per spec.
     pub fn new(specs: &[EstimatorSpec]) -> Result<Self> {
-        let estimators = specs.iter().map(EstimatorSpec::build).collect::<Result<_>>()?;
+        let estimators = specs
+            .iter()
+            .map(EstimatorSpec::build)
+            .collect::<Result<_>>()?;
         Ok(Bank {
             estimators,
             count: 0,

@@ -46,9 +46,13 @@ impl Jung {
     /// `sigma_image` finite and > 0; `m_max` an odd integer in `1..=MAX_M_MAX`.
     pub fn new(sigma_image: f64, m_max: usize) -> Result<Self> {
         if !(sigma_image > 0.0 && sigma_image.is_finite()) {
-            return Err(Error::param("sigma_image", sigma_image, "must be finite and > 0"));
+            return Err(Error::param(
+                "sigma_image",
+                sigma_image,
+                "must be finite and > 0",
+            ));
         }
-        if m_max.is_multiple_of(2) || !(1..=MAX_M_MAX).contains(&m_max) {
+        if m_max % 2 == 0 || !(1..=MAX_M_MAX).contains(&m_max) {
             return Err(Error::param(
                 "m_max",
                 m_max,
@@ -70,7 +74,11 @@ impl Jung {
     /// Zero (a black image so far) is allowed here; negative or non-finite values are not.
     pub fn set_sigma_image(&mut self, sigma_image: f64) -> Result<()> {
         if !(sigma_image >= 0.0 && sigma_image.is_finite()) {
-            return Err(Error::param("sigma_image", sigma_image, "must be finite and >= 0"));
+            return Err(Error::param(
+                "sigma_image",
+                sigma_image,
+                "must be finite and >= 0",
+            ));
         }
         self.sigma_image = sigma_image;
         Ok(())
@@ -84,7 +92,11 @@ impl Jung {
 
 impl fmt::Display for Jung {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "Jung(sigma_image={},M_max={})", self.sigma_image, self.m_max)
+        write!(
+            f,
+            "Jung(sigma_image={},M_max={})",
+            self.sigma_image, self.m_max
+        )
     }
 }
 
@@ -131,7 +143,11 @@ impl Estimator for Jung {
     fn state_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + self.partitions.capacity() * std::mem::size_of::<Partition>()
-            + self.partitions.iter().map(Partition::heap_bytes).sum::<usize>()
+            + self
+                .partitions
+                .iter()
+                .map(Partition::heap_bytes)
+                .sum::<usize>()
     }
 
     fn spec(&self) -> EstimatorSpec {
@@ -166,8 +182,23 @@ mod tests {
 
     #[test]
     fn bad_parameters_are_named() {
-        assert!(Jung::new(0.0, 17).unwrap_err().to_string().contains("sigma_image = 0"));
-        assert!(Jung::new(1.0, 16).unwrap_err().to_string().contains("m_max = 16"));
-        assert!(Jung::new(1.0, 0).unwrap_err().to_string().contains("m_max = 0"));
+        assert!(
+            Jung::new(0.0, 17)
+                .unwrap_err()
+                .to_string()
+                .contains("sigma_image = 0")
+        );
+        assert!(
+            Jung::new(1.0, 16)
+                .unwrap_err()
+                .to_string()
+                .contains("m_max = 16")
+        );
+        assert!(
+            Jung::new(1.0, 0)
+                .unwrap_err()
+                .to_string()
+                .contains("m_max = 0")
+        );
     }
 }

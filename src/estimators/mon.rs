@@ -66,7 +66,10 @@ impl Partition {
         let mut rest = samples;
         // Finish the current round, then whole rounds, so the inner loop has no wrap test.
         let head = (m - self.cursor).min(rest.len());
-        for (sum, &s) in self.sums[self.cursor..self.cursor + head].iter_mut().zip(rest) {
+        for (sum, &s) in self.sums[self.cursor..self.cursor + head]
+            .iter_mut()
+            .zip(rest)
+        {
             sum.add(s);
         }
         self.cursor = (self.cursor + head) % m;
@@ -230,7 +233,9 @@ impl Estimator for Mon {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::Mon { m: self.part.sets() }
+        EstimatorSpec::Mon {
+            m: self.part.sets(),
+        }
     }
 }
 
@@ -248,7 +253,9 @@ impl Estimator for GiniDiagnostic {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::Gini { m: self.part.sets() }
+        EstimatorSpec::Gini {
+            m: self.part.sets(),
+        }
     }
 }
 
@@ -276,7 +283,9 @@ impl Estimator for Gmon {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::Gmon { m: self.part.sets() }
+        EstimatorSpec::Gmon {
+            m: self.part.sets(),
+        }
     }
 }
 
@@ -352,7 +361,10 @@ impl Estimator for GmonB {
 
     fn extras(&self) -> Extras {
         match self.decide() {
-            Ok((_, g, used_mon)) => vec![("gini", Extra::Float(g)), ("used_mon", Extra::Bool(used_mon))],
+            Ok((_, g, used_mon)) => vec![
+                ("gini", Extra::Float(g)),
+                ("used_mon", Extra::Bool(used_mon)),
+            ],
             Err(_) => Vec::new(),
         }
     }

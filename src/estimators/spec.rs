@@ -5,7 +5,7 @@
 //! canonical form (every key in table order, floats in shortest round-trip form), and parsing
 //! the printed form gives the same spec back.
 
-use super::{Clamp, Estimator, Gmon, GmonB, GiniDiagnostic, Jung, Mean, Mon, Zirr, ZirrRef};
+use super::{Clamp, Estimator, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon, Zirr, ZirrRef};
 use crate::error::{Error, Result};
 use std::fmt;
 use std::str::FromStr;
@@ -223,14 +223,22 @@ impl fmt::Display for EstimatorSpec {
             }
             EstimatorSpec::Gmon { m } => write!(f, "gmon:M={m}"),
             EstimatorSpec::Jung { sigma_image, m_max } => {
-                write!(f, "jung:sigma_image={},m_max={m_max}", fmt_f64(*sigma_image))
+                write!(
+                    f,
+                    "jung:sigma_image={},m_max={m_max}",
+                    fmt_f64(*sigma_image)
+                )
             }
             EstimatorSpec::Zirr(p) => zirr(f, "zirr", p),
             EstimatorSpec::ZirrRef(p) => zirr(f, "zirr-ref", p),
             EstimatorSpec::PajotRot { learn } => write!(f, "pajot-rot:learn={learn}"),
             EstimatorSpec::PajotAdr { learn } => write!(f, "pajot-adr:learn={learn}"),
             EstimatorSpec::PajotHybrid { learn, t, delta } => {
-                write!(f, "pajot-hybrid:learn={learn},T={t},delta={}", fmt_f64(*delta))
+                write!(
+                    f,
+                    "pajot-hybrid:learn={learn},T={t},delta={}",
+                    fmt_f64(*delta)
+                )
             }
         }
     }
@@ -326,7 +334,11 @@ impl FromStr for EstimatorSpec {
                 None => defaults.j,
                 Some("auto") if auto_ok => CascadeSize::Auto,
                 Some(v) => CascadeSize::Fixed(parse_int(v).ok_or_else(|| {
-                    let expected = if auto_ok { "an integer literal or 'auto'" } else { "an integer literal" };
+                    let expected = if auto_ok {
+                        "an integer literal or 'auto'"
+                    } else {
+                        "an integer literal"
+                    };
                     keys.malformed(format!("J = '{v}' is not {expected}"))
                 })?),
             };
@@ -341,22 +353,34 @@ impl FromStr for EstimatorSpec {
         let k = &mut keys;
         Ok(match name {
             "mean" => EstimatorSpec::Mean,
-            "clamp" => EstimatorSpec::Clamp { c: k.float("c", None)? },
-            "mon" => EstimatorSpec::Mon { m: k.int("M", None)? },
-            "gini" => EstimatorSpec::Gini { m: k.int("M", None)? },
+            "clamp" => EstimatorSpec::Clamp {
+                c: k.float("c", None)?,
+            },
+            "mon" => EstimatorSpec::Mon {
+                m: k.int("M", None)?,
+            },
+            "gini" => EstimatorSpec::Gini {
+                m: k.int("M", None)?,
+            },
             "gmonb" => EstimatorSpec::GmonB {
                 m: k.int("M", None)?,
                 threshold: k.float("threshold", Some(0.25))?,
             },
-            "gmon" => EstimatorSpec::Gmon { m: k.int("M", None)? },
+            "gmon" => EstimatorSpec::Gmon {
+                m: k.int("M", None)?,
+            },
             "jung" => EstimatorSpec::Jung {
                 sigma_image: k.float("sigma_image", None)?,
                 m_max: k.int("m_max", Some(17))?,
             },
             "zirr" => EstimatorSpec::Zirr(zirr(k, ZirrParams::PAPER, true)?),
             "zirr-ref" => EstimatorSpec::ZirrRef(zirr(k, ZirrParams::REFERENCE, false)?),
-            "pajot-rot" => EstimatorSpec::PajotRot { learn: k.int("learn", Some(50))? },
-            "pajot-adr" => EstimatorSpec::PajotAdr { learn: k.int("learn", Some(50))? },
+            "pajot-rot" => EstimatorSpec::PajotRot {
+                learn: k.int("learn", Some(50))?,
+            },
+            "pajot-adr" => EstimatorSpec::PajotAdr {
+                learn: k.int("learn", Some(50))?,
+            },
             "pajot-hybrid" => EstimatorSpec::PajotHybrid {
                 learn: k.int("learn", Some(50))?,
                 t: k.int("T", Some(2))?,
@@ -408,20 +432,35 @@ mod tests {
     #[test]
     fn errors_name_what_is_wrong() {
         let e = "median".parse::<EstimatorSpec>().unwrap_err().to_string();
-        assert!(e.contains("'median'") && e.contains("gmonb") && e.contains("pajot-hybrid"), "{e}");
+        assert!(
+            e.contains("'median'") && e.contains("gmonb") && e.contains("pajot-hybrid"),
+            "{e}"
+        );
         let e = "mon:N=3".parse::<EstimatorSpec>().unwrap_err().to_string();
         assert!(e.contains("'N'") && e.contains("valid keys: M"), "{e}");
-        let e = "mon:M=5.0".parse::<EstimatorSpec>().unwrap_err().to_string();
+        let e = "mon:M=5.0"
+            .parse::<EstimatorSpec>()
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("integer literal"), "{e}");
-        let e = "mon:M=3,M=5".parse::<EstimatorSpec>().unwrap_err().to_string();
+        let e = "mon:M=3,M=5"
+            .parse::<EstimatorSpec>()
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("twice"), "{e}");
         let e = "mon".parse::<EstimatorSpec>().unwrap_err().to_string();
         assert!(e.contains("missing required key 'M'"), "{e}");
-        let e = "zirr-ref:J=auto".parse::<EstimatorSpec>().unwrap_err().to_string();
+        let e = "zirr-ref:J=auto"
+            .parse::<EstimatorSpec>()
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("J = 'auto'"), "{e}");
         let e = "mean:M=3".parse::<EstimatorSpec>().unwrap_err().to_string();
         assert!(e.contains("valid keys: (none)"), "{e}");
-        let e = "clamp:c=abc".parse::<EstimatorSpec>().unwrap_err().to_string();
+        let e = "clamp:c=abc"
+            .parse::<EstimatorSpec>()
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("c = 'abc'"), "{e}");
         let e = "mon:M".parse::<EstimatorSpec>().unwrap_err().to_string();
         assert!(e.contains("not key=value"), "{e}");

@@ -77,7 +77,7 @@ pub fn deviation_threshold(
     dist: &Dist,
     n: usize,
 ) -> Option<f64> {
-    let sigma = dist.variance()?.sqrt();
+    let sigma = dist.mean() * dist.relative_variance()?.sqrt();
     let nf = n as f64;
     match *spec {
         EstimatorSpec::Mean if cfg.chebyshev_k > 0.0 => Some(cfg.chebyshev_k * sigma / nf.sqrt()),
@@ -117,26 +117,27 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
         for (e, spec) in exp.estimators.iter().enumerate() {
             for (i, &n) in cps.iter().enumerate() {
                 let cell = &d.cells[e * cps.len() + i];
-                let mut push = |check: &'static str, claim: String, observed: String, p_value: f64| {
-                    results.push(CheckResult {
-                        check,
-                        distribution: d.label.clone(),
-                        estimator: spec.to_string(),
-                        n,
-                        claim,
-                        observed,
-                        p_value,
-                        holm_alpha: None,
-                        passed: true,
-                        gating: !cfg.findings.iter().any(|f| f == check),
-                    });
-                };
+                let mut push =
+                    |check: &'static str, claim: String, observed: String, p_value: f64| {
+                        results.push(CheckResult {
+                            check,
+                            distribution: d.label.clone(),
+                            estimator: spec.to_string(),
+                            n,
+                            claim,
+                            observed,
+                            p_value,
+                            holm_alpha: None,
+                            passed: true,
+                            gating: !cfg.findings.iter().any(|f| f == check),
+                        });
+                    };
                 // Relative units (X / mu): finite at any scale of the law.
                 let moments = cell.relative_estimate_moments();
-                if let (EstimatorSpec::Mean, true, Some(var)) =
-                    (spec, cfg.unbiased_mean, d.variance)
+                if let (EstimatorSpec::Mean, true, Some(rel_var)) =
+                    (spec, cfg.unbiased_mean, dist.dist.relative_variance())
                 {
-                    let se = (var / (n as f64 * t as f64)).sqrt() / d.mu;
+                    let se = (rel_var / (n as f64 * t as f64)).sqrt();
                     let bias = moments.mean() - 1.0;
                     let z = bias / se;
                     push(
@@ -165,7 +166,9 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
                     let s2 = moments.sample_variance();
                     let m4 = moments.m4();
                     let tf = t as f64;
-                    let se = ((m4 - s2 * s2 * (tf - 3.0) / (tf - 1.0)) / tf).max(0.0).sqrt();
+                    let se = ((m4 - s2 * s2 * (tf - 3.0) / (tf - 1.0)) / tf)
+                        .max(0.0)
+                        .sqrt();
                     let p_value = if se > 0.0 {
                         normal_sf((s2 - bound) / se)
                     } else if s2 > bound {
@@ -192,7 +195,9 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
                     push(
                         "firefly-vs-mean",
                         "no more fireflies than the mean on the same trials".into(),
-                        format!("{only_here} trials firefly here only, {only_mean} under the mean only"),
+                        format!(
+                            "{only_here} trials firefly here only, {only_mean} under the mean only"
+                        ),
                         binomial_upper(only_here, only_here + only_mean, 0.5),
                     );
                 }
@@ -243,7 +248,10 @@ mod tests {
         let mut r: Vec<_> = [0.001, 0.04, 0.012, 0.5].into_iter().map(result).collect();
         holm(&mut r, 0.05);
         // Thresholds 0.0125, 0.0167, 0.025: 0.001 and 0.012 rejected, 0.04 > 0.025 stops.
-        assert_eq!(r.iter().map(|c| c.passed).collect::<Vec<_>>(), [false, true, false, true]);
+        assert_eq!(
+            r.iter().map(|c| c.passed).collect::<Vec<_>>(),
+            [false, true, false, true]
+        );
     }
 
     #[test]

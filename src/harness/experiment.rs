@@ -161,12 +161,20 @@ impl Experiment {
 
     /// The embedded default experiment.
     pub fn default_experiment() -> Result<Self> {
-        Self::from_toml(DEFAULT_TOML, "experiments/default.toml (embedded)", "default")
+        Self::from_toml(
+            DEFAULT_TOML,
+            "experiments/default.toml (embedded)",
+            "default",
+        )
     }
 
     fn from_file(file: ExperimentFile, text: &str, default_name: &str) -> Result<Self> {
         if file.trials < 4 {
-            return Err(Error::param("trials", file.trials, "must be at least 4 (spec §7)"));
+            return Err(Error::param(
+                "trials",
+                file.trials,
+                "must be at least 4 (spec §7)",
+            ));
         }
         if file.checkpoints.is_empty()
             || file.checkpoints[0] == 0
@@ -183,13 +191,25 @@ impl Experiment {
         }
         let c = &file.checks;
         if !(c.family_alpha > 0.0 && c.family_alpha < 1.0) {
-            return Err(Error::param("checks.family_alpha", c.family_alpha, "must be in (0, 1)"));
+            return Err(Error::param(
+                "checks.family_alpha",
+                c.family_alpha,
+                "must be in (0, 1)",
+            ));
         }
         if !(c.mon_delta >= 0.0 && c.mon_delta < 1.0) {
-            return Err(Error::param("checks.mon_delta", c.mon_delta, "must be in [0, 1)"));
+            return Err(Error::param(
+                "checks.mon_delta",
+                c.mon_delta,
+                "must be in [0, 1)",
+            ));
         }
         if !(c.chebyshev_k == 0.0 || c.chebyshev_k > 1.0) {
-            return Err(Error::param("checks.chebyshev_k", c.chebyshev_k, "must be 0 or > 1"));
+            return Err(Error::param(
+                "checks.chebyshev_k",
+                c.chebyshev_k,
+                "must be 0 or > 1",
+            ));
         }
         if !(c.firefly_ceiling > 0.0 && c.firefly_ceiling <= 1.0) {
             return Err(Error::param(
@@ -203,7 +223,10 @@ impl Experiment {
                 return Err(Error::param(
                     "checks.findings",
                     f,
-                    format!("is not a check kind; valid: {}", super::checks::KINDS.join(", ")),
+                    format!(
+                        "is not a check kind; valid: {}",
+                        super::checks::KINDS.join(", ")
+                    ),
                 ));
             }
         }
@@ -213,7 +236,11 @@ impl Experiment {
             .map(|s| s.parse::<EstimatorSpec>())
             .collect::<Result<Vec<_>>>()?;
         if estimators.is_empty() {
-            return Err(Error::param("estimators", "[]", "name at least one estimator"));
+            return Err(Error::param(
+                "estimators",
+                "[]",
+                "name at least one estimator",
+            ));
         }
         for spec in &estimators {
             spec.build()?;
@@ -239,16 +266,26 @@ impl Experiment {
                 (None, DistSpec::Preset { name }) => name.clone(),
                 (None, _) => dist.to_string(),
             };
-            if distributions.iter().any(|d: &Distribution| d.label == label) {
+            if distributions
+                .iter()
+                .any(|d: &Distribution| d.label == label)
+            {
                 return Err(Error::param("distributions.label", label, "is used twice"));
             }
             distributions.push(Distribution { label, dist });
         }
         if distributions.is_empty() {
-            return Err(Error::param("distributions", "[]", "name at least one distribution"));
+            return Err(Error::param(
+                "distributions",
+                "[]",
+                "name at least one distribution",
+            ));
         }
         Ok(Experiment {
-            name: file.name.clone().unwrap_or_else(|| default_name.to_string()),
+            name: file
+                .name
+                .clone()
+                .unwrap_or_else(|| default_name.to_string()),
             file,
             source_toml: text.to_string(),
             estimators,
@@ -287,20 +324,28 @@ dist = { kind = "preset", name = "diffuse" }
     #[test]
     fn unknown_key_names_key_and_line() {
         let text = MINIMAL.replace("trials = 8", "trials = 8\ntrails = 9");
-        let e = Experiment::from_toml(&text, "t.toml", "t").unwrap_err().to_string();
+        let e = Experiment::from_toml(&text, "t.toml", "t")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("trails") && e.contains("line 4"), "{e}");
     }
 
     #[test]
     fn bad_values_are_named() {
         let text = MINIMAL.replace("[4, 16]", "[16, 4]");
-        let e = Experiment::from_toml(&text, "t.toml", "t").unwrap_err().to_string();
+        let e = Experiment::from_toml(&text, "t.toml", "t")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("checkpoints"), "{e}");
         let text = MINIMAL.replace("mon:M=3", "mon:M=0");
-        let e = Experiment::from_toml(&text, "t.toml", "t").unwrap_err().to_string();
+        let e = Experiment::from_toml(&text, "t.toml", "t")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("M = 0"), "{e}");
         let text = MINIMAL.replace("\"diffuse\"", "\"difuse\"");
-        let e = Experiment::from_toml(&text, "t.toml", "t").unwrap_err().to_string();
+        let e = Experiment::from_toml(&text, "t.toml", "t")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("difuse"), "{e}");
     }
 

@@ -82,7 +82,14 @@ fn se(r: &Row) -> Option<f64> {
 
 /// Compares every gated metric present in both tables.
 pub fn compare(baseline: &[Row], now: &[Row], cfg: &GateConfig) -> Vec<Comparison> {
-    let key = |r: &Row| (r.distribution.clone(), r.estimator.clone(), r.n, r.metric.clone());
+    let key = |r: &Row| {
+        (
+            r.distribution.clone(),
+            r.estimator.clone(),
+            r.n,
+            r.metric.clone(),
+        )
+    };
     let base: BTreeMap<_, &Row> = baseline.iter().map(|r| (key(r), r)).collect();
     let std = Normal::new(0.0, 1.0).expect("standard normal");
     let mut out = Vec::new();
@@ -125,8 +132,15 @@ pub fn compare(baseline: &[Row], now: &[Row], cfg: &GateConfig) -> Vec<Compariso
         });
     }
     // Holm over the gated comparisons; a regression also needs to clear its margin.
-    let mut order: Vec<usize> = (0..out.len()).filter(|&i| out[i].p_value.is_some()).collect();
-    order.sort_by(|&a, &b| out[a].p_value.unwrap_or(1.0).total_cmp(&out[b].p_value.unwrap_or(1.0)));
+    let mut order: Vec<usize> = (0..out.len())
+        .filter(|&i| out[i].p_value.is_some())
+        .collect();
+    order.sort_by(|&a, &b| {
+        out[a]
+            .p_value
+            .unwrap_or(1.0)
+            .total_cmp(&out[b].p_value.unwrap_or(1.0))
+    });
     let m = order.len();
     for (rank, &i) in order.iter().enumerate() {
         let level = cfg.family_alpha / (m - rank) as f64;
@@ -191,10 +205,18 @@ mod tests {
         let c = compare(&base, &[row("relative_bias", 0.008, 0.001)], &cfg);
         assert!(!c[0].regression);
         // Large but not significant: not a regression.
-        let c = compare(&[row("relative_bias", 0.0, 0.05)], &[row("relative_bias", 0.03, 0.05)], &cfg);
+        let c = compare(
+            &[row("relative_bias", 0.0, 0.05)],
+            &[row("relative_bias", 0.03, 0.05)],
+            &cfg,
+        );
         assert!(!c[0].regression);
         // Bias moving towards zero is an improvement.
-        let c = compare(&[row("relative_bias", 0.05, 0.001)], &[row("relative_bias", -0.01, 0.001)], &cfg);
+        let c = compare(
+            &[row("relative_bias", 0.05, 0.001)],
+            &[row("relative_bias", -0.01, 0.001)],
+            &cfg,
+        );
         assert!(!c[0].regression && c[0].worsening < 0.0);
     }
 
@@ -203,7 +225,11 @@ mod tests {
         let mut r = row("variance", 5.0, 0.0);
         r.ci_low = None;
         r.ci_high = None;
-        let c = compare(std::slice::from_ref(&r), &[row("variance", 50.0, 1.0)], &GateConfig::default());
+        let c = compare(
+            std::slice::from_ref(&r),
+            &[row("variance", 50.0, 1.0)],
+            &GateConfig::default(),
+        );
         assert!(c[0].p_value.is_none() && !c[0].regression);
         assert!(table(&c).contains("not gated"));
     }

@@ -148,7 +148,9 @@ impl LogHistogram {
             self.zeros += 1;
             return;
         }
-        let bin = (x.log10() * BINS_PER_DECADE).floor().clamp(-40_000.0, 40_000.0) as i32;
+        let bin = (x.log10() * BINS_PER_DECADE)
+            .floor()
+            .clamp(-40_000.0, 40_000.0) as i32;
         *self.bins.entry(bin).or_insert(0) += 1;
     }
 
@@ -492,7 +494,9 @@ mod tests {
 
     #[test]
     fn merged_moments_equal_single_pass() {
-        let xs: Vec<f64> = (0..1000).map(|i| ((i * 7919) % 1013) as f64 / 17.0).collect();
+        let xs: Vec<f64> = (0..1000)
+            .map(|i| ((i * 7919) % 1013) as f64 / 17.0)
+            .collect();
         let mut all = Moments::default();
         xs.iter().for_each(|&x| all.push(x));
         let mut parts = Moments::default();

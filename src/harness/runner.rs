@@ -179,7 +179,10 @@ impl Shard {
     pub fn parse(text: &str) -> Result<Shard> {
         let bad = || Error::param("shard", text, "must be i/k with 0 <= i < k, e.g. 0/4");
         let (i, k) = text.split_once('/').ok_or_else(bad)?;
-        let (index, count) = (i.trim().parse().map_err(|_| bad())?, k.trim().parse().map_err(|_| bad())?);
+        let (index, count) = (
+            i.trim().parse().map_err(|_| bad())?,
+            k.trim().parse().map_err(|_| bad())?,
+        );
         if count == 0 || index >= count {
             return Err(bad());
         }
@@ -221,7 +224,11 @@ pub fn run(exp: &Experiment, opts: &RunOptions) -> Result<RunOutput> {
 fn trial_count(exp: &Experiment, opts: &RunOptions) -> Result<u64> {
     let trials = opts.trials.unwrap_or(exp.file.trials);
     if trials < 4 {
-        return Err(Error::param("trials", trials, "must be at least 4 (spec §7)"));
+        return Err(Error::param(
+            "trials",
+            trials,
+            "must be at least 4 (spec §7)",
+        ));
     }
     Ok(trials)
 }
@@ -234,7 +241,8 @@ pub fn run_shard(exp: &Experiment, opts: &RunOptions, shard: Shard) -> Result<Sh
         .num_threads(opts.threads.unwrap_or(0))
         .build()
         .map_err(|e| Error::param("threads", format!("{:?}", opts.threads), e.to_string()))?;
-    let shard_trials = (blocks.end * BLOCK_TRIALS).min(trials) - (blocks.start * BLOCK_TRIALS).min(trials);
+    let shard_trials =
+        (blocks.end * BLOCK_TRIALS).min(trials) - (blocks.start * BLOCK_TRIALS).min(trials);
     let bar = if opts.progress {
         let bar = ProgressBar::new(shard_trials * exp.distributions.len() as u64);
         if let Ok(style) = ProgressStyle::with_template(
@@ -281,7 +289,8 @@ pub fn fold(exp: &Experiment, shards: &[ShardOutput]) -> Result<RunOutput> {
     let mut next = 0;
     for s in &ordered {
         let owned = s.blocks.first().map_or(0, |b| b.len() as u64);
-        if s.trials != trials || s.blocks.len() != exp.distributions.len() || s.first_block != next {
+        if s.trials != trials || s.blocks.len() != exp.distributions.len() || s.first_block != next
+        {
             return Err(Error::param(
                 "shards",
                 format!("{}/{}", s.shard.index, s.shard.count),
@@ -360,7 +369,8 @@ fn run_blocks(
     let mut wave = blocks.start;
     while wave < blocks.end {
         let wave_end = (wave + WAVE_BLOCKS).min(blocks.end);
-        let chunks = wave * BLOCK_CHUNKS..(wave_end * BLOCK_CHUNKS).min(trials.div_ceil(CHUNK_TRIALS));
+        let chunks =
+            wave * BLOCK_CHUNKS..(wave_end * BLOCK_CHUNKS).min(trials.div_ceil(CHUNK_TRIALS));
         let results = chunks
             .clone()
             .into_par_iter()
@@ -424,6 +434,16 @@ fn run_chunk(
             for (i, &n) in checkpoints.iter().enumerate() {
                 est.push_slice(&samples[from..n]);
                 estimates[i] = est.estimate()?;
+                if !estimates[i].is_finite() {
+                    return Err(Error::param(
+                        "estimate",
+                        estimates[i],
+                        format!(
+                            "{est} gave a non-finite estimate at n = {n}, trial {trial} of {}",
+                            d.label
+                        ),
+                    ));
+                }
                 from = n;
             }
             out.estimator_nanos[e] += t0.elapsed().as_nanos() as u64;
@@ -454,6 +474,9 @@ mod tests {
         assert_eq!(draw("a", 0), draw("a", 0));
         assert_ne!(draw("a", 0), draw("a", 1));
         assert_ne!(draw("a", 0), draw("b", 0));
-        assert_ne!(trial_rng(1, "a", 0).next_u64(), trial_rng(2, "a", 0).next_u64());
+        assert_ne!(
+            trial_rng(1, "a", 0).next_u64(),
+            trial_rng(2, "a", 0).next_u64()
+        );
     }
 }

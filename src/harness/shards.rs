@@ -102,10 +102,20 @@ pub fn merge(files: &[PathBuf]) -> Result<(Experiment, RunOutput)> {
     let mut seen: Vec<Option<&PathBuf>> = vec![None; count as usize];
     for (path, s) in &shards {
         if s.format != first.format {
-            return Err(mismatch(path, "format", s.format.to_string(), first.format.to_string()));
+            return Err(mismatch(
+                path,
+                "format",
+                s.format.to_string(),
+                first.format.to_string(),
+            ));
         }
         if s.crate_version != first.crate_version {
-            return Err(mismatch(path, "version", s.crate_version.clone(), first.crate_version.clone()));
+            return Err(mismatch(
+                path,
+                "version",
+                s.crate_version.clone(),
+                first.crate_version.clone(),
+            ));
         }
         if s.experiment_toml != first.experiment_toml {
             return Err(mismatch(
@@ -151,7 +161,11 @@ pub fn merge(files: &[PathBuf]) -> Result<(Experiment, RunOutput)> {
             format!("is missing ({} of {count} shard files given)", shards.len()),
         ));
     }
-    let exp = Experiment::from_toml(&first.experiment_toml, "shard experiment", &first.experiment)?;
+    let exp = Experiment::from_toml(
+        &first.experiment_toml,
+        "shard experiment",
+        &first.experiment,
+    )?;
     let outputs: Vec<ShardOutput> = shards.into_iter().map(|(_, s)| s.output).collect();
     let merged = runner::fold(&exp, &outputs)?;
     Ok((exp, merged))

@@ -37,29 +37,6 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     })
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn replaces_whole_file_and_leaves_no_temporary() {
-        let dir = std::env::temp_dir().join(format!("fireflies-atomic-{}", std::process::id()));
-        let path = dir.join("out.txt");
-        write_atomic(&path, b"first").unwrap();
-        write_atomic(&path, b"second").unwrap();
-        assert_eq!(fs::read(&path).unwrap(), b"second");
-        let leftovers = fs::read_dir(&dir).unwrap().count();
-        assert_eq!(leftovers, 1);
-        fs::remove_dir_all(&dir).unwrap();
-    }
-
-    #[test]
-    fn unwritable_path_is_an_error_naming_it() {
-        let e = write_atomic(Path::new("/proc/fireflies/x.csv"), b"x").unwrap_err();
-        assert!(e.to_string().contains("/proc/fireflies"), "{e}");
-    }
-}
-
 /// Writes `results.csv`, `speed.csv`, `summary.md`, `checks.json` and `manifest.json` into
 /// `dir`, each atomically. Returns the rows of both CSVs (what the plots read).
 pub fn write_tables(
@@ -84,4 +61,27 @@ pub fn write_tables(
         tables::manifest_json(exp, out, checks).as_bytes(),
     )?;
     Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn replaces_whole_file_and_leaves_no_temporary() {
+        let dir = std::env::temp_dir().join(format!("fireflies-atomic-{}", std::process::id()));
+        let path = dir.join("out.txt");
+        write_atomic(&path, b"first").unwrap();
+        write_atomic(&path, b"second").unwrap();
+        assert_eq!(fs::read(&path).unwrap(), b"second");
+        let leftovers = fs::read_dir(&dir).unwrap().count();
+        assert_eq!(leftovers, 1);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn unwritable_path_is_an_error_naming_it() {
+        let e = write_atomic(Path::new("/proc/fireflies/x.csv"), b"x").unwrap_err();
+        assert!(e.to_string().contains("/proc/fireflies"), "{e}");
+    }
 }

@@ -55,10 +55,18 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
                 push("median_abs_rel_error", m.median_abs_rel_error, false);
                 push("mean_abs_rel_error", m.mean_abs_rel_error, false);
                 for (q, v) in m.rel_error_quantiles {
-                    push(&format!("rel_error_q{:02}", (q * 100.0).round()), Interval::bare(v), false);
+                    push(
+                        &format!("rel_error_q{:02}", (q * 100.0).round()),
+                        Interval::bare(v),
+                        false,
+                    );
                 }
                 push("firefly_rate", m.firefly_rate, false);
-                push("outlier_trials", Interval::bare(m.outlier_trials as f64), false);
+                push(
+                    "outlier_trials",
+                    Interval::bare(m.outlier_trials as f64),
+                    false,
+                );
                 if let Some(r) = m.rejection_rate {
                     push("rejection_rate", r, false);
                 }
@@ -78,7 +86,10 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
                 });
             };
             push_bare("state_bytes_max", d.state_bytes_max[e] as f64);
-            push_bare("state_bytes_mean", d.state_bytes_sum[e] as f64 / out.trials as f64);
+            push_bare(
+                "state_bytes_mean",
+                d.state_bytes_sum[e] as f64 / out.trials as f64,
+            );
         }
     }
     rows
@@ -101,7 +112,12 @@ pub fn speed_rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
     let mut rows = Vec::new();
     for d in &out.dists {
         for (e, spec) in exp.estimators.iter().enumerate() {
-            rows.push(row(&d.label, spec.to_string(), "ns_per_sample", d.ns_per_sample(e)));
+            rows.push(row(
+                &d.label,
+                spec.to_string(),
+                "ns_per_sample",
+                d.ns_per_sample(e),
+            ));
         }
         rows.push(row(
             &d.label,
@@ -154,7 +170,12 @@ fn fmt_ci(iv: &Interval) -> String {
 
 fn pct(iv: &Interval) -> String {
     match (iv.low, iv.high) {
-        (Some(l), Some(h)) => format!("{:.2}% [{:.2}, {:.2}]", 100.0 * iv.value, 100.0 * l, 100.0 * h),
+        (Some(l), Some(h)) => format!(
+            "{:.2}% [{:.2}, {:.2}]",
+            100.0 * iv.value,
+            100.0 * l,
+            100.0 * h
+        ),
         _ => format!("{:.2}%", 100.0 * iv.value),
     }
 }
@@ -189,7 +210,11 @@ pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> 
         let var = d
             .variance
             .map_or("infinite".to_string(), |v| format!("{v:.6}"));
-        let _ = writeln!(s, "## {}\n\n`{}`: mean {}, variance {}.\n", d.label, d.law, d.mu, var);
+        let _ = writeln!(
+            s,
+            "## {}\n\n`{}`: mean {}, variance {}.\n",
+            d.label, d.law, d.mu, var
+        );
         let _ = writeln!(
             s,
             "At n = {} samples per pixel:\n\n| estimator | median abs rel error | bias | relative RMSE | firefly rate | rejection rate | paired vs mean | ns/sample | state bytes |\n|---|---|---|---|---|---|---|---|---|",
@@ -210,7 +235,9 @@ pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> 
             };
             let rejection = m
                 .rejection_rate
-                .map_or("– (0 outlier trials)".to_string(), |r| format!("{} of {}", pct(&r), m.outlier_trials));
+                .map_or("– (0 outlier trials)".to_string(), |r| {
+                    format!("{} of {}", pct(&r), m.outlier_trials)
+                });
             let _ = writeln!(
                 s,
                 "| `{}` | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
@@ -225,7 +252,11 @@ pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> 
                 d.state_bytes_max[e]
             );
         }
-        let _ = writeln!(s, "\nDrawing samples: {:.2} ns/sample.\n", d.generate_ns_per_sample());
+        let _ = writeln!(
+            s,
+            "\nDrawing samples: {:.2} ns/sample.\n",
+            d.generate_ns_per_sample()
+        );
     }
     let failed = checks.iter().filter(|c| !c.passed).count();
     let _ = writeln!(
@@ -240,7 +271,10 @@ pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> 
         checks.len(),
         exp.file.checks.family_alpha
     );
-    let _ = writeln!(s, "| verdict | check | distribution | estimator | n | claim | observed | p | Holm level |\n|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        s,
+        "| verdict | check | distribution | estimator | n | claim | observed | p | Holm level |\n|---|---|---|---|---|---|---|---|---|"
+    );
     let mut sorted: Vec<&CheckResult> = checks.iter().collect();
     sorted.sort_by_key(|c| c.passed);
     for c in sorted {
@@ -314,7 +348,11 @@ pub fn manifest_json(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) 
         trials: out.trials,
         checkpoints: &exp.file.checkpoints,
         estimators: exp.estimators.iter().map(ToString::to_string).collect(),
-        distributions: out.dists.iter().map(|d| (d.label.clone(), d.law.clone())).collect(),
+        distributions: out
+            .dists
+            .iter()
+            .map(|d| (d.label.clone(), d.law.clone()))
+            .collect(),
         crate_version: env!("CARGO_PKG_VERSION"),
         git_commit: git_commit(),
         threads: out.threads,
