@@ -204,7 +204,11 @@ pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> 
         "Primary metric: median absolute relative error with its order-statistic 95% interval \
          (quantiles from a log histogram, exact to 2.3%). Intervals are 95%. `paired` is the \
          mean over trials of this estimator's absolute relative error minus the mean's on the \
-         same samples (negative: better than the mean).\n"
+         same samples (negative: better than the mean). Variance, MSE and relative-RMSE \
+         intervals are normal-theory and assume the estimate has a finite fourth moment; where \
+         it does not (the mean on a tail of shape < 4) they are unreliable, and where the \
+         variance itself is infinite they are omitted. No bootstrap is run: the runner keeps no \
+         per-trial values, so that a million trials cost the memory of a thousand.\n"
     );
     for d in &out.dists {
         let var = d
