@@ -44,21 +44,19 @@ fn parse_specs(texts: &[String]) -> Result<Vec<EstimatorSpec>> {
     texts.iter().map(|t| t.parse()).collect()
 }
 
-/// Streams one file (or stdin) into freshly built estimators.
-fn feed(path: Option<&PathBuf>, estimators: &mut [Box<dyn Estimator>]) -> Result<u64> {
-    let name = match path {
-        Some(p) if p.as_os_str() != "-" => p.display().to_string(),
-        _ => "-".to_string(),
-    };
+/// Streams a file (or stdin for `-` or no file) block by block; returns the sample count.
+fn stream(path: Option<&PathBuf>, mut on_block: impl FnMut(&[f64])) -> Result<u64> {
     let push = |block: &[f64]| {
-        estimators.iter_mut().for_each(|e| e.push_slice(block));
+        on_block(block);
         Ok(())
     };
-    if name == "-" {
-        samples::for_each_block("-", io::stdin().lock(), push)
-    } else {
-        let file = File::open(&name).map_err(|e| Error::io(&name, &e))?;
-        samples::for_each_block(&name, BufReader::new(file), push)
+    match path {
+        Some(p) if p.as_os_str() != "-" => {
+            let name = p.display().to_string();
+            let file = File::open(p).map_err(|e| Error::io(&name, &e))?;
+            samples::for_each_block(&name, BufReader::new(file), push)
+        }
+        _ => samples::for_each_block("-", io::stdin().lock(), push),
     }
 }
 
@@ -84,7 +82,9 @@ fn eval_stream(
         .iter()
         .map(EstimatorSpec::build)
         .collect::<Result<Vec<_>>>()?;
-    let n = feed(file, &mut estimators)?;
+    let n = stream(file, |block| {
+        estimators.iter_mut().for_each(|e| e.push_slice(block));
+    })?;
     if n == 0 {
         let name = file.map_or("-".to_string(), |p| p.display().to_string());
         return Err(Error::EmptyStream(format!("input {name}")));
@@ -96,14 +96,9 @@ fn eval_stream(
         .collect()
 }
 
-/// Streams one named file into a typed estimator; returns the sample count.
+/// Streams one named file into an estimator; returns the sample count.
 fn read_into<T: Estimator + ?Sized>(estimator: &mut T, path: &PathBuf) -> Result<u64> {
-    let name = path.display().to_string();
-    let file = File::open(path).map_err(|e| Error::io(&name, &e))?;
-    samples::for_each_block(&name, BufReader::new(file), |b| {
-        estimator.push_slice(b);
-        Ok(())
-    })
+    stream(Some(path), |block| estimator.push_slice(block))
 }
 
 /// The block estimate of a neighbourhood-capable estimator over nine files.
