@@ -187,8 +187,9 @@ impl EstimatorSpec {
     }
 }
 
-/// Shortest round-trip text of a float; exponent form when the plain form would be long.
-fn fmt_f64(x: f64) -> String {
+/// Shortest round-trip text of a float; exponent form when the plain form would be long
+/// (`1e300`, not three hundred digits).
+pub(super) fn fmt_f64(x: f64) -> String {
     let plain = format!("{x}");
     if plain.len() > 18 {
         format!("{x:e}")

@@ -95,6 +95,7 @@
 //!   (this is clamp-to-edge at image borders). A present pixel without samples counts 0.
 
 use super::{CascadeSize, Estimator, EstimatorSpec, Extra, Extras, Neumaier, ZirrParams};
+use super::spec::fmt_f64;
 use crate::error::{Error, Result};
 use std::fmt;
 
@@ -116,16 +117,6 @@ enum Flavor {
     Reference,
 }
 
-/// Shortest round-trip text of a float, in exponent form when the plain form is long
-/// (`1e300`, not three hundred digits).
-fn fmt_f64(x: f64) -> String {
-    let plain = format!("{x}");
-    if plain.len() > 18 {
-        format!("{x:e}")
-    } else {
-        plain
-    }
-}
 
 /// The streaming state shared by both variants: `N`, the buffers `A_j` and the parameters.
 #[derive(Debug, Clone)]
