@@ -31,9 +31,10 @@ const LABEL: &str = "infinite-variance";
 /// Samples per trial: the single checkpoint.
 const N: usize = 4096;
 /// Trials per iteration: 33.6 M samples (32 of the runner's 256-trial chunks, 16 per thread).
-/// Measured on 2 idle cores: about 0.17 s for the bare loop, 0.3 s for the mean and MoN(21),
+/// On 2 idle cores that is about 0.17 s for the bare loop, 0.3 s for the mean and MoN(21) and
 /// 1 s for all nine estimators (criterion then asks for a longer measurement time; the numbers
-/// are still taken over 10 samples).
+/// are still taken over 10 samples). On a shared VM the times can double: compare the three
+/// throughputs of one run, not across runs.
 const TRIALS: u64 = 8192;
 
 /// Every constant-memory estimator at the parameters a user would start from (as in
