@@ -252,3 +252,42 @@ fn run_errors_name_the_line_and_the_path() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("/proc/fireflies-not-writable"));
 }
+
+#[test]
+fn embedded_default_and_hard_cases_run_with_finite_estimates() {
+    let dir = scratch("shipped");
+    let hard = concat!(env!("CARGO_MANIFEST_DIR"), "/experiments/hard_cases.toml");
+    for (args, name) in [
+        (vec!["run", "--trials", "256"], "default"),
+        (vec!["run", hard, "--trials", "512"], "hard"),
+    ] {
+        let out_dir = dir.join(name);
+        let out = bin()
+            .args(&args)
+            .arg("--out")
+            .arg(&out_dir)
+            .output()
+            .unwrap();
+        // A non-finite estimate would stop the run with exit code 2 and name it.
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let csv = std::fs::read_to_string(out_dir.join("results.csv")).unwrap();
+        assert!(csv.lines().count() > 500, "{name}");
+        assert!(out_dir.join("median_error.png").metadata().unwrap().len() > 10_000);
+    }
+}
+
+#[test]
+fn dist_relative_variance_is_exact_where_the_variance_overflows() {
+    use fireflies::dist::{Dist, LogNormal};
+    let tiny = Dist::from(LogNormal::new(-690.0, 1.0).unwrap());
+    let huge = Dist::from(LogNormal::new(690.0, 1.0).unwrap());
+    let want = 1f64.exp_m1();
+    for d in [tiny, huge] {
+        let rv = d.relative_variance().unwrap();
+        assert!((rv - want).abs() < 1e-12 * want, "{d}: {rv}");
+    }
+}

@@ -218,10 +218,14 @@ mod tests {
         assert!(e.contains("sigma") && e.contains("-2.5"), "{e}");
         let e = LogNormal::new(f64::INFINITY, 1.0).unwrap_err().to_string();
         assert!(e.contains("mu") && e.contains("inf"), "{e}");
-        let e = LogNormal::new(700.0, 3.0).unwrap_err().to_string();
+        // The mean exp(714.5) overflows; exp(704.5) = 1e306 fits, its variance need not.
+        let e = LogNormal::new(710.0, 3.0).unwrap_err().to_string();
         assert!(
-            e.contains("mu") && e.contains("700") && e.contains("sigma = 3"),
+            e.contains("mu") && e.contains("710") && e.contains("sigma = 3"),
             "{e}"
         );
+        let huge = LogNormal::new(700.0, 3.0).unwrap();
+        assert_eq!(huge.variance(), Some(f64::INFINITY));
+        assert!((huge.relative_variance() - 9f64.exp_m1()).abs() < 1e-9 * 9f64.exp_m1());
     }
 }

@@ -94,8 +94,8 @@
 //!   pixel and 0 otherwise (rows likewise), or of the centre if `(dx*, dy*)` is missing too
 //!   (this is clamp-to-edge at image borders). A present pixel without samples counts 0.
 
-use super::{CascadeSize, Estimator, EstimatorSpec, Extra, Extras, Neumaier, ZirrParams};
 use super::spec::fmt_f64;
+use super::{CascadeSize, Estimator, EstimatorSpec, Extra, Extras, Neumaier, ZirrParams};
 use crate::error::{Error, Result};
 use std::fmt;
 
@@ -116,7 +116,6 @@ enum Flavor {
     /// The released shader's averaged count and colour terms (spec §5a).
     Reference,
 }
-
 
 /// The streaming state shared by both variants: `N`, the buffers `A_j` and the parameters.
 #[derive(Debug, Clone)]
