@@ -39,6 +39,13 @@ impl LogNormal {
         let s2 = sigma * sigma;
         let mean = (mu + 0.5 * s2).exp();
         let variance = s2.exp_m1() * (2.0 * mu + s2).exp();
+        if !(s2 > 0.0) {
+            return Err(Error::param(
+                "sigma",
+                sigma,
+                "sigma^2 underflows to 0: use a point mass for no spread",
+            ));
+        }
         if !(mean > 0.0 && mean.is_finite() && s2.exp_m1().is_finite()) {
             return Err(Error::param(
                 "mu",
