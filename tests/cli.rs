@@ -157,6 +157,9 @@ fn eval_block_evaluates_the_centre_with_its_neighbours() {
         .unwrap();
     let lines = json_lines(&out);
     assert!((lines[0]["estimate"].as_f64().unwrap() - 1.8857142857142857).abs() < 1e-12);
+    // Extras (Zirr's per-buffer `counts`) never replace the fixed keys.
+    assert_eq!(lines[0]["n"], 7);
+    assert_eq!(lines[0]["counts"].as_array().unwrap().len(), 6);
     assert_eq!(lines[1]["estimate"].as_f64().unwrap(), 363.2 / 7.0);
     // An empty file is a pixel outside the image; an empty centre is an error.
     write(&dir.join("p0.txt"), "");

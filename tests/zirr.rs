@@ -112,7 +112,7 @@ fn spec_5_example_fixed_cascade() {
     let z = zirr(fixed(6), &RUNNING);
     let e = z.extras();
     let keys: Vec<&str> = e.iter().map(|(k, _)| *k).collect();
-    assert_eq!(keys, ["J_used", "over_range", "B", "n", "rho", "w"]);
+    assert_eq!(keys, ["J_used", "over_range", "B", "counts", "rho", "w"]);
     assert_eq!(int(&e, "J_used"), 6);
     assert_eq!(int(&e, "over_range"), 0);
     let b = floats(&e, "B");
@@ -126,8 +126,8 @@ fn spec_5_example_fixed_cascade() {
     {
         assert!((x - w).abs() < 5e-7, "A = {a:?}");
     }
-    assert_all_rel(&floats(&e, "n"), &N_RUNNING, 1e-12);
-    assert_eq!(floats(&e, "rho"), floats(&e, "n"));
+    assert_all_rel(&floats(&e, "counts"), &N_RUNNING, 1e-12);
+    assert_eq!(floats(&e, "rho"), floats(&e, "counts"));
     assert_eq!(floats(&e, "w"), [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]);
     assert_rel(z.estimate().unwrap(), PAPER_ESTIMATE, 1e-12);
     assert_rel(PAPER_ESTIMATE, (A0 + A1 + A2) / 7.0, 1e-15);
@@ -142,7 +142,7 @@ fn spec_5_example_auto_cascade_has_four_buffers_and_same_numbers() {
     let e = z.extras();
     assert_eq!(int(&e, "J_used"), 4);
     assert_eq!(int(&e, "over_range"), 0);
-    for key in ["B", "n", "rho", "w"] {
+    for key in ["B", "counts", "rho", "w"] {
         assert_eq!(floats(&e, key), floats(&fixed6, key)[..4], "{key}");
     }
     assert_eq!(
@@ -164,7 +164,7 @@ fn spec_5_splat_of_350_uses_buffer_2_with_a_0_066122() {
         1e-12,
     );
     // eqs. 17–18: a lone split sample adds exactly 1 to both counts it touches.
-    let n = floats(&e, "n");
+    let n = floats(&e, "counts");
     assert_rel(n[2], 1.0, 1e-15);
     assert_rel(n[3], 1.0, 1e-15);
 }
@@ -179,7 +179,7 @@ fn spec_5_three_by_three_example() {
     for p in [fixed(6), ZirrParams::PAPER] {
         let centre = zirr(p, &RUNNING);
         let neighbour = zirr(p, &ones());
-        assert_eq!(floats(&neighbour.extras(), "n")[..2], [7.0, 7.0]);
+        assert_eq!(floats(&neighbour.extras(), "counts")[..2], [7.0, 7.0]);
         let mut block = [Some(&neighbour); 9];
         block[4] = Some(&centre);
         let (est, e) = Zirr::block_estimate(&block).unwrap();
@@ -203,7 +203,7 @@ fn spec_5_three_by_three_example() {
         }
         assert_eq!(floats(&e, "w"), [1.0, 1.0, 0.0, 0.0, 0.0, 0.0][..len]);
         // The centre's own buffers and counts are reported unchanged.
-        assert_eq!(floats(&e, "n"), floats(&centre.extras(), "n"));
+        assert_eq!(floats(&e, "counts"), floats(&centre.extras(), "counts"));
         assert_eq!(floats(&e, "B"), floats(&centre.extras(), "B"));
     }
 }
@@ -215,12 +215,20 @@ fn spec_5a_example() {
     let keys: Vec<&str> = e.iter().map(|(k, _)| *k).collect();
     assert_eq!(
         keys,
-        ["J_used", "over_range", "B", "n", "rho", "w", "discarded"]
+        [
+            "J_used",
+            "over_range",
+            "B",
+            "counts",
+            "rho",
+            "w",
+            "discarded"
+        ]
     );
     // Same buffers and counts as §5.
     let paper = zirr(fixed(6), &RUNNING).extras();
     assert_eq!(floats(&e, "B"), floats(&paper, "B"));
-    assert_eq!(floats(&e, "n"), floats(&paper, "n"));
+    assert_eq!(floats(&e, "counts"), floats(&paper, "counts"));
     assert_all_rel(
         &floats(&e, "w"),
         &[1.0, 1.0, 0.7174107142857143, 0.02910442741549745, 0.0, 0.0],
@@ -960,7 +968,7 @@ proptest! {
         let j = int(&e, "J_used") as usize;
         let lit = literal(&p, j, false, &xs);
         prop_assert_eq!(floats(&e, "B"), lit.b);
-        prop_assert_eq!(floats(&e, "n"), lit.n);
+        prop_assert_eq!(floats(&e, "counts"), lit.n);
         prop_assert_eq!(floats(&e, "w"), lit.w);
         prop_assert_eq!(z.estimate().unwrap(), lit.estimate);
     }
@@ -973,7 +981,7 @@ proptest! {
         let e = z.extras();
         let lit = literal(&p, j, true, &xs);
         prop_assert_eq!(floats(&e, "B"), lit.b);
-        prop_assert_eq!(floats(&e, "n"), lit.n);
+        prop_assert_eq!(floats(&e, "counts"), lit.n);
         prop_assert_eq!(floats(&e, "w"), lit.w);
         prop_assert_eq!(z.estimate().unwrap(), lit.estimate);
         prop_assert_eq!(float(&e, "discarded"), lit.discarded);

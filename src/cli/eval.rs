@@ -32,10 +32,12 @@ fn json_line(spec_text: &str, n: u64, estimate: f64, extras: &Extras) -> String 
     obj.insert("n".into(), n.into());
     obj.insert("estimate".into(), serde_json::json!(estimate));
     for (key, value) in extras {
-        obj.insert(
-            (*key).into(),
-            serde_json::to_value(value).unwrap_or_default(),
-        );
+        // Extras never replace the three fixed keys.
+        let key = match *key {
+            "estimator" | "n" | "estimate" => format!("extra_{key}"),
+            k => k.to_string(),
+        };
+        obj.insert(key, serde_json::to_value(value).unwrap_or_default());
     }
     serde_json::Value::Object(obj).to_string()
 }

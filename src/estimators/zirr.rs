@@ -480,7 +480,7 @@ impl Cascade {
             ("J_used", Extra::Int(len as u64)),
             ("over_range", Extra::Int(self.over_range)),
             ("B", Extra::Floats(bs)),
-            ("n", Extra::Floats(ns)),
+            ("counts", Extra::Floats(ns)),
             ("rho", Extra::Floats(rhos)),
             ("w", Extra::Floats(ws)),
         ];
@@ -855,7 +855,7 @@ mod tests {
         for (x, w) in a.iter().zip(want_a) {
             assert!((x - w).abs() < 1e-6, "{a:?}");
         }
-        let n = floats(&e, "n");
+        let n = floats(&e, "counts");
         let want_n = [4.6, 4.961607, 2.228571, 1.0, 0.638393, 0.0];
         for (x, w) in n.iter().zip(want_n) {
             assert!((x - w).abs() < 1e-6, "{n:?}");
