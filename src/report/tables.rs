@@ -320,7 +320,7 @@ pub struct Manifest<'a> {
     pub distributions: Vec<(String, String)>,
     /// `fireflies` version.
     pub crate_version: &'static str,
-    /// `git rev-parse HEAD` of the working directory, if any.
+    /// The commit the binary was built from, if any.
     pub git_commit: Option<String>,
     /// Worker threads.
     pub threads: usize,
@@ -334,14 +334,10 @@ pub struct Manifest<'a> {
     pub checks_failed: usize,
 }
 
+/// The commit the binary was built from (recorded by `build.rs`), if built from a checkout.
 fn git_commit() -> Option<String> {
-    let out = std::process::Command::new("git")
-        .args(["rev-parse", "HEAD"])
-        .output()
-        .ok()?;
-    out.status
-        .success()
-        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+    let commit = env!("FIREFLIES_GIT_COMMIT");
+    (!commit.is_empty()).then(|| commit.to_string())
 }
 
 /// `manifest.json` text.
