@@ -110,13 +110,11 @@ impl Estimator for Jung {
     }
 
     fn push_slice(&mut self, samples: &[f64]) {
-        // One fused pass: the Welford update is a long dependency chain (a division per
-        // sample); interleaving the partitions' independent additions hides most of it.
         for &s in samples {
             self.spread.push(s);
-            for p in &mut self.partitions {
-                p.push(s);
-            }
+        }
+        for p in &mut self.partitions {
+            p.push_slice(samples);
         }
     }
 
