@@ -405,10 +405,14 @@ fn run_chunk(
     let mut estimators: Vec<Box<dyn Estimator>> =
         exp.estimators.iter().map(build).collect::<Result<_>>()?;
     let mut out = BlockStats::empty(template, estimators.len());
+    let cps = checkpoints.len();
+    // The paired differences need the plain mean of each trial: read it from the experiment's
+    // own `mean` when it runs one, instead of computing it twice.
+    let mean_index = exp.estimators.iter().position(|s| *s == EstimatorSpec::Mean);
     let mut samples = vec![0.0; exp.max_n()];
-    let mut mean_estimates = vec![0.0; checkpoints.len()];
-    let mut outlier = vec![false; checkpoints.len()];
-    let mut estimates = vec![0.0; checkpoints.len()];
+    let mut own_mean = vec![0.0; cps];
+    let mut outlier = vec![false; cps];
+    let mut estimates = vec![0.0; estimators.len() * cps];
     for trial in trials {
         let mut rng = trial_rng(exp.file.seed, &d.label, trial);
         let t0 = Instant::now();
@@ -416,13 +420,9 @@ fn run_chunk(
         out.generate_nanos += t0.elapsed().as_nanos() as u64;
         validate_samples(&samples, 0)?;
 
-        let mut mean = Mean::new();
         let (mut from, mut max) = (0, 0.0f64);
         for (i, &n) in checkpoints.iter().enumerate() {
-            let segment = &samples[from..n];
-            mean.push_slice(segment);
-            max = segment.iter().fold(max, |m, &x| m.max(x));
-            mean_estimates[i] = mean.estimate()?;
+            max = samples[from..n].iter().fold(max, |m, &x| m.max(x));
             outlier[i] = max >= n as f64 * mu;
             from = n;
         }
@@ -433,31 +433,49 @@ fn run_chunk(
             let mut from = 0;
             for (i, &n) in checkpoints.iter().enumerate() {
                 est.push_slice(&samples[from..n]);
-                estimates[i] = est.estimate()?;
-                if !estimates[i].is_finite() {
+                let x = est.estimate()?;
+                if !x.is_finite() {
                     return Err(Error::param(
                         "estimate",
-                        estimates[i],
+                        x,
                         format!(
                             "{est} gave a non-finite estimate at n = {n}, trial {trial} of {}",
                             d.label
                         ),
                     ));
                 }
+                estimates[e * cps + i] = x;
                 from = n;
             }
             out.estimator_nanos[e] += t0.elapsed().as_nanos() as u64;
             let bytes = est.state_bytes();
             out.state_bytes_max[e] = out.state_bytes_max[e].max(bytes);
             out.state_bytes_sum[e] += bytes as u64;
-            for i in 0..checkpoints.len() {
-                let o = Observation {
-                    estimate: estimates[i],
-                    mean_estimate: mean_estimates[i],
-                    outlier: outlier[i],
-                };
-                out.cells[e * checkpoints.len() + i].push(o, mu, tau);
+        }
+
+        let mean_estimates = match mean_index {
+            Some(m) => &estimates[m * cps..(m + 1) * cps],
+            None => {
+                let (mut mean, mut from) = (Mean::new(), 0);
+                for (i, &n) in checkpoints.iter().enumerate() {
+                    mean.push_slice(&samples[from..n]);
+                    own_mean[i] = mean.estimate()?;
+                    from = n;
+                }
+                &own_mean[..]
             }
+        };
+        for (cell, (&estimate, i)) in out
+            .cells
+            .iter_mut()
+            .zip(estimates.iter().zip((0..cps).cycle()))
+        {
+            let o = Observation {
+                estimate,
+                mean_estimate: mean_estimates[i],
+                outlier: outlier[i],
+            };
+            cell.push(o, mu, tau);
         }
     }
     Ok(out)
