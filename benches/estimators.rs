@@ -11,17 +11,7 @@ use std::hint::black_box;
 const BLOCK: usize = 4096;
 
 /// Every constant-memory estimator at the parameters a user would start from.
-const CONSTANT_MEMORY: &[&str] = &[
-    "mean",
-    "clamp:c=10",
-    "mon:M=21",
-    "gini:M=21",
-    "gmonb:M=21",
-    "gmon:M=21",
-    "jung:sigma_image=1",
-    "zirr",
-    "zirr-ref",
-];
+const CONSTANT_MEMORY: &[&str] = &fireflies::estimators::CONSTANT_MEMORY_SET;
 
 fn block() -> Vec<f64> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(7);

@@ -37,19 +37,8 @@ const N: usize = 4096;
 /// throughputs of one run, not across runs.
 const TRIALS: u64 = 8192;
 
-/// Every constant-memory estimator at the parameters a user would start from (as in
-/// `benches/estimators.rs`).
-const CONSTANT_MEMORY: &[&str] = &[
-    "mean",
-    "clamp:c=10",
-    "mon:M=21",
-    "gini:M=21",
-    "gmonb:M=21",
-    "gmon:M=21",
-    "jung:sigma_image=1",
-    "zirr",
-    "zirr-ref",
-];
+/// Every constant-memory estimator at the parameters a user would start from.
+const CONSTANT_MEMORY: &[&str] = &fireflies::estimators::CONSTANT_MEMORY_SET;
 
 /// The NumPy-comparable task.
 const MEAN_MON: &[&str] = &["mean", "mon:M=21"];

@@ -215,30 +215,4 @@ mod tests {
         let msg = bad.err().map(|e| e.to_string()).unwrap_or_default();
         assert!(msg.contains("fire") && msg.contains("firefly"), "{msg}");
     }
-
-    #[test]
-    fn bad_component_names_index_and_shape() {
-        let spec = DistSpec::Mixture {
-            components: vec![
-                ComponentSpec {
-                    weight: 0.99,
-                    dist: DistSpec::PointMass { value: 0.0 },
-                },
-                ComponentSpec {
-                    weight: 0.01,
-                    dist: DistSpec::Pareto {
-                        scale: 1.0,
-                        shape: 0.75,
-                    },
-                },
-            ],
-        };
-        let e = spec.build().unwrap_err();
-        assert!(matches!(e, Error::Component { component: 1, .. }), "{e:?}");
-        let s = e.to_string();
-        assert!(
-            s.contains("component 1") && s.contains("shape") && s.contains("0.75"),
-            "{s}"
-        );
-    }
 }

@@ -25,7 +25,7 @@ pub use mean::Mean;
 pub use mon::{GiniDiagnostic, Gmon, GmonB, Mon, Partition, gini};
 pub use numeric::{Neumaier, Welford};
 pub use pajot::{PajotAdr, PajotHybrid, PajotMode, PajotRot, adr_bandwidths};
-pub use spec::{CascadeSize, EstimatorSpec, ZirrParams};
+pub use spec::{CONSTANT_MEMORY_SET, CascadeSize, EstimatorSpec, ZirrParams};
 pub use zirr::{Zirr, ZirrRef};
 
 use crate::error::Result;

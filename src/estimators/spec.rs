@@ -114,6 +114,20 @@ pub enum EstimatorSpec {
     },
 }
 
+/// Every constant-memory estimator at the parameters a user would start from: the set the
+/// benchmarks and speed goals measure as "a Bank of all constant-memory estimators".
+pub const CONSTANT_MEMORY_SET: [&str; 9] = [
+    "mean",
+    "clamp:c=10",
+    "mon:M=21",
+    "gini:M=21",
+    "gmonb:M=21",
+    "gmon:M=21",
+    "jung:sigma_image=1",
+    "zirr",
+    "zirr-ref",
+];
+
 /// Every estimator name with its keys in canonical order.
 const TABLE: &[(&str, &[&str])] = &[
     ("mean", &[]),

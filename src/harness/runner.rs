@@ -408,7 +408,10 @@ fn run_chunk(
     let cps = checkpoints.len();
     // The paired differences need the plain mean of each trial: read it from the experiment's
     // own `mean` when it runs one, instead of computing it twice.
-    let mean_index = exp.estimators.iter().position(|s| *s == EstimatorSpec::Mean);
+    let mean_index = exp
+        .estimators
+        .iter()
+        .position(|s| *s == EstimatorSpec::Mean);
     let mut samples = vec![0.0; exp.max_n()];
     let mut own_mean = vec![0.0; cps];
     let mut outlier = vec![false; cps];
