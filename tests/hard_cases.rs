@@ -7,21 +7,8 @@ use fireflies::estimators::{
     Bank, Estimator, EstimatorSpec, Extra, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon,
 };
 
-/// The running example of spec §1.
-const S: [f64; 7] = [0.6, 1.5, 0.0, 2.2, 4.8, 350.0, 4.1];
-
-/// Spec §1 accuracy.
-const REL: f64 = 1e-12;
-
-#[track_caller]
-fn assert_rel(actual: f64, expected: f64, tol: f64) {
-    let err = (actual - expected).abs();
-    assert!(
-        err <= tol * expected.abs(),
-        "actual {actual:?} vs expected {expected:?}: relative error {:e} > {tol:e}",
-        err / expected.abs()
-    );
-}
+mod common;
+use common::{REL, S, assert_rel};
 
 fn run(spec: &str, xs: &[f64]) -> Box<dyn Estimator> {
     let mut e = spec

@@ -10,22 +10,8 @@ use fireflies::estimators::{
     Bank, Clamp, Estimator, EstimatorSpec, Extra, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon,
 };
 
-/// The running example of spec §1.
-const S: [f64; 7] = [0.6, 1.5, 0.0, 2.2, 4.8, 350.0, 4.1];
-
-/// Worked examples must match to this relative tolerance (spec §1, "Accuracy").
-const REL: f64 = 1e-12;
-
-/// Asserts `|actual - expected| <= tol * |expected|` (exact equality when `expected` is 0).
-#[track_caller]
-fn assert_rel(actual: f64, expected: f64, tol: f64) {
-    let err = (actual - expected).abs();
-    assert!(
-        err <= tol * expected.abs(),
-        "actual {actual:?} vs expected {expected:?}: relative error {:e} > {tol:e}",
-        err / expected.abs()
-    );
-}
+mod common;
+use common::{REL, S, assert_rel};
 
 fn parse(spec: &str) -> EstimatorSpec {
     spec.parse()
