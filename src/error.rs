@@ -88,6 +88,21 @@ pub enum Error {
         /// The sample itself.
         value: f64,
     },
+    /// A scene file (Mitsuba 3 XML subset) that cannot be loaded: unknown or misspelt element,
+    /// plugin or parameter, a malformed or out-of-range value, a missing required element, or an
+    /// unreadable referenced file.
+    #[error("{file}:{line}: <{element}>: {message}")]
+    Scene {
+        /// Scene file name as given to the loader.
+        file: String,
+        /// 1-based line of the offending element.
+        line: u32,
+        /// The element: its tag and its `type`, `name` or `id` attribute, e.g.
+        /// `shape type="sphere"` or `float name="alpha"`.
+        element: String,
+        /// What is wrong, naming the offending value.
+        message: String,
+    },
     /// Reading or writing a file failed.
     #[error("{path}: {message}")]
     Io {

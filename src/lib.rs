@@ -13,10 +13,13 @@
 // Parameter checks are written `if !(x > 0.0)` on purpose: NaN must fail them too.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod atomic;
 pub mod dist;
 pub mod error;
 pub mod estimators;
 pub mod harness;
+pub mod image;
+pub mod render;
 pub mod report;
 pub mod samples;
 

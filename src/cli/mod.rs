@@ -3,6 +3,7 @@
 mod eval;
 mod gate;
 mod merge;
+mod render;
 mod run;
 
 use clap::{Parser, Subcommand};
@@ -27,6 +28,8 @@ enum Command {
     Gate(gate::GateArgs),
     /// Merge shard files of one run into its report.
     Merge(merge::MergeArgs),
+    /// Path-trace a Mitsuba 3 scene into per-pixel estimator banks.
+    Render(render::RenderArgs),
 }
 
 /// Runs the chosen subcommand; `Err` exits with status 2.
@@ -36,6 +39,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Run(args)) => run::run(&args),
         Some(Command::Merge(args)) => merge::run(&args),
         Some(Command::Gate(args)) => gate::run(&args),
+        Some(Command::Render(args)) => render::run(&args),
         None => run::run(&run::RunArgs::default()),
     }
 }

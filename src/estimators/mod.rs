@@ -15,6 +15,7 @@ mod mean;
 mod mon;
 mod numeric;
 mod pajot;
+mod rgb;
 mod spec;
 pub mod zirr;
 
@@ -25,6 +26,7 @@ pub use mean::Mean;
 pub use mon::{GiniDiagnostic, Gmon, GmonB, Mon, Partition, gini};
 pub use numeric::{Neumaier, Welford};
 pub use pajot::{PajotAdr, PajotHybrid, PajotMode, PajotRot, adr_bandwidths};
+pub use rgb::{REC709, RgbEstimator, build_rgb, luminance};
 pub use spec::{CONSTANT_MEMORY_SET, CascadeSize, EstimatorSpec, ZirrParams};
 pub use zirr::{Zirr, ZirrRef};
 

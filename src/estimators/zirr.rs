@@ -93,6 +93,16 @@
 //!   `(dx, dy)` takes the counts of `(dx*, dy*)`, where `dx* = dx` if column `dx` has any present
 //!   pixel and 0 otherwise (rows likewise), or of the centre if `(dx*, dy*)` is missing too
 //!   (this is clamp-to-edge at image borders). A present pixel without samples counts 0.
+//!
+//! # Colour
+//!
+//! A colour film runs the cascade on each sample's luminance and splats the sample's RGB with
+//! the same fractions: [`Zirr::push_split`] / [`ZirrRef::push_split`] push one luminance like
+//! [`Estimator::push`] and return where it went ([`Splat`]); [`Zirr::weights`] and
+//! [`Zirr::block_weights`] (and the same on [`ZirrRef`]) return the `w_j` the estimate applies
+//! to the buffers, so the film's estimate is `Σ_j w_j·B_j(RGB)`. They change nothing in the
+//! scalar method: a `push_split` makes the same additions as `push`, and the weights are those
+//! the estimate composes with.
 
 use super::spec::fmt_f64;
 use super::{CascadeSize, Estimator, EstimatorSpec, Extra, Extras, Neumaier, ZirrParams};
@@ -115,6 +125,42 @@ enum Flavor {
     Paper,
     /// The released shader's averaged count and colour terms (spec §5a).
     Reference,
+}
+
+/// Where one sample pushed through [`Zirr::push_split`] or [`ZirrRef::push_split`] went: the
+/// hook that lets a colour film splat an RGB sample with the fractions of its luminance.
+///
+/// For a sample `S` (the luminance) and any other quantity `X` carried with it (one colour
+/// channel), the buffers receive:
+///
+/// * [`Splat::Whole`]: `X` into buffer `j` (below `u`, a black sample, or over the top of a
+///   fixed `zirr` cascade);
+/// * [`Splat::Split`]: `a·X` into buffer `j` and `X − a·X` into buffer `j + 1` (\[Z\] eqs. 15–16,
+///   the same operations the luminance itself went through);
+/// * [`Splat::Clamped`]: `v·(X/S)` into buffer `j`, the top buffer of `zirr-ref`, which keeps
+///   only `v = c_{J−1}` of the sample's `S` (spec §5a); the fraction `c_{J−1}/S` of `X` is kept
+///   and the rest discarded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Splat {
+    /// The whole sample went into buffer `j`.
+    Whole {
+        /// Buffer index.
+        j: usize,
+    },
+    /// `a·S` went into buffer `j`, `S − a·S` into buffer `j + 1`.
+    Split {
+        /// Lower buffer index.
+        j: usize,
+        /// The lower buffer's fraction, in `[0, 1]`.
+        a: f64,
+    },
+    /// Only `v < S` (or `v = S`) went into the top buffer `j`; the rest was discarded.
+    Clamped {
+        /// Buffer index (`J − 1`).
+        j: usize,
+        /// The energy kept, `c_{J−1}`.
+        v: f64,
+    },
 }
 
 /// The streaming state shared by both variants: `N`, the buffers `A_j` and the parameters.
@@ -339,6 +385,54 @@ impl Cascade {
         }
         self.over_range = over_range;
         self.n += samples.len() as u64;
+    }
+
+    /// Pushes one sample exactly as [`Cascade::push_block`] would (the same additions to the
+    /// same accumulators, so the buffers stay bit-identical to a block push) and tells where it
+    /// went. `clamp_top` selects `zirr-ref`'s top buffer, which keeps `c_{J−1}` of the sample
+    /// (the caller accounts for the discarded part).
+    fn push_one(&mut self, x: f64, clamp_top: bool) -> Splat {
+        let (b, u, ib, limit) = (self.params.b, self.params.u, self.ib, self.limit);
+        // x/1 = x exactly, so this is push_block's s with or without the u = 1 shortcut.
+        let s = x / u;
+        self.n += 1;
+        if s < 1.0 {
+            self.a[0].add(x);
+            return Splat::Whole { j: 0 };
+        }
+        let (j, p) = locate(b, limit - 1, s);
+        if j + 1 == limit {
+            if s > p || p == f64::INFINITY {
+                self.over_range += 1;
+            }
+            grow(&mut self.a, limit);
+            if clamp_top {
+                let v = u * p;
+                self.a[j].add(v);
+                return Splat::Clamped { j, v };
+            }
+            self.a[j].add(x);
+            return Splat::Whole { j };
+        }
+        let a = ((p / s - ib) / (1.0 - ib)).max(0.0);
+        let part = a * x;
+        let rest = x - part;
+        grow(&mut self.a, j + 2);
+        self.a[j].add(part);
+        self.a[j + 1].add(rest);
+        Splat::Split { j, a }
+    }
+
+    /// The weights `w_j`, one per buffer, that [`Cascade::compose`] gives with the rejection
+    /// counts `rho` (the pixel's own counts when `None`). Requires `N > 0`.
+    fn weights(&self, flavor: Flavor, rho: Option<&[f64]>) -> Vec<f64> {
+        let mut w = Vec::with_capacity(self.a.len());
+        self.compose(
+            flavor,
+            |j, nj| rho.map_or(nj, |r| r[j]),
+            |_, _, _, wj| w.push(wj),
+        );
+        w
     }
 
     /// Calls `f(j, B_j, n_j, c_j)` for `j` in `0..len` (spec §5 "Buffers", "Counts", eq. 19),
@@ -581,8 +675,37 @@ impl Zirr {
     /// `rho`. Errors when the centre is missing or empty, or when a pixel's parameters differ
     /// from the centre's (naming its index).
     pub fn block_estimate(block: &[Option<&Self>; 9]) -> Result<(f64, Extras)> {
-        let centre = &check_block(block, |z: &Zirr| &z.c)?.c;
-        let len = centre.a.len();
+        let (centre, rho) = Self::block_rho(block)?;
+        Ok(centre.c.report(Flavor::Paper, Some(&rho)))
+    }
+
+    /// Pushes one sample (the same as [`Estimator::push`]) and tells which buffers received
+    /// which fractions of it: the hook for a colour film that splats each RGB sample with the
+    /// fractions of its luminance (see [`Splat`]).
+    pub fn push_split(&mut self, sample: f64) -> Splat {
+        self.c.push_one(sample, false)
+    }
+
+    /// The weights `w_j` of the estimate, one per buffer of the cascade (`J_used` of them): the
+    /// estimate is `Σ_j w_j·B_j`, summed in ascending `j`. Errors without samples.
+    pub fn weights(&self) -> Result<Vec<f64>> {
+        if self.c.n == 0 {
+            return Err(super::empty(self));
+        }
+        Ok(self.c.weights(Flavor::Paper, None))
+    }
+
+    /// The weights `w_j` of [`Zirr::block_estimate`]'s estimate for the centre of the block,
+    /// one per buffer of the centre's cascade. Errors as [`Zirr::block_estimate`].
+    pub fn block_weights(block: &[Option<&Self>; 9]) -> Result<Vec<f64>> {
+        let (centre, rho) = Self::block_rho(block)?;
+        Ok(centre.c.weights(Flavor::Paper, Some(&rho)))
+    }
+
+    /// The checked centre of a block and its rejection counts `ρ_j` (\[Z\] §5.3.1).
+    fn block_rho<'a>(block: &[Option<&'a Self>; 9]) -> Result<(&'a Self, Vec<f64>)> {
+        let centre = check_block(block, |z: &Zirr| &z.c)?;
+        let len = centre.c.a.len();
         let mut sum = vec![0.0f64; len];
         let mut pixels = 0usize;
         for px in block.iter().flatten() {
@@ -593,7 +716,7 @@ impl Zirr {
             px.c.for_each_row(len, |j, _, n, _| sum[j] += n);
         }
         let rho: Vec<f64> = sum.iter().map(|s| s / pixels as f64).collect();
-        Ok(centre.report(Flavor::Paper, Some(&rho)))
+        Ok((centre, rho))
     }
 }
 
@@ -708,6 +831,41 @@ impl ZirrRef {
     /// pixels and 0 for present pixels without samples (spec §5a; see the module docs).
     /// Errors as [`Zirr::block_estimate`].
     pub fn block_estimate(block: &[Option<&Self>; 9]) -> Result<(f64, Extras)> {
+        let (centre, rho) = Self::block_rho(block)?;
+        let (estimate, mut extras) = centre.c.report(Flavor::Reference, Some(&rho));
+        extras.push(("discarded", Extra::Float(centre.discarded_mean())));
+        Ok((estimate, extras))
+    }
+
+    /// Pushes one sample (the same as [`Estimator::push`]) and tells which buffers received
+    /// which fractions of it; a sample at or over the top buffer's reference brightness comes
+    /// back as [`Splat::Clamped`] (see [`Splat`]).
+    pub fn push_split(&mut self, sample: f64) -> Splat {
+        let splat = self.c.push_one(sample, true);
+        if let Splat::Clamped { v, .. } = splat {
+            self.discarded.add(sample - v);
+        }
+        splat
+    }
+
+    /// The weights `w_j` of the estimate, one per buffer (`J` of them): the estimate is
+    /// `Σ_j w_j·B_j`, summed in ascending `j`. Errors without samples.
+    pub fn weights(&self) -> Result<Vec<f64>> {
+        if self.c.n == 0 {
+            return Err(super::empty(self));
+        }
+        Ok(self.c.weights(Flavor::Reference, None))
+    }
+
+    /// The weights `w_j` of [`ZirrRef::block_estimate`]'s estimate for the centre of the
+    /// block. Errors as [`ZirrRef::block_estimate`].
+    pub fn block_weights(block: &[Option<&Self>; 9]) -> Result<Vec<f64>> {
+        let (centre, rho) = Self::block_rho(block)?;
+        Ok(centre.c.weights(Flavor::Reference, Some(&rho)))
+    }
+
+    /// The checked centre of a block and its rejection counts `ρ_j` (spec §5a).
+    fn block_rho<'a>(block: &[Option<&'a Self>; 9]) -> Result<(&'a Self, Vec<f64>)> {
         let centre = check_block(block, |z: &ZirrRef| &z.c)?;
         let len = centre.c.a.len();
         let present = block.map(|px| px.is_some());
@@ -732,9 +890,7 @@ impl ZirrRef {
             }
         }
         let rho: Vec<f64> = sum.iter().map(|s| s / 9.0).collect();
-        let (estimate, mut extras) = centre.c.report(Flavor::Reference, Some(&rho));
-        extras.push(("discarded", Extra::Float(centre.discarded_mean())));
-        Ok((estimate, extras))
+        Ok((centre, rho))
     }
 
     /// The discarded energy as a per-sample mean (0 without samples).
@@ -879,6 +1035,56 @@ mod tests {
             xs.iter().for_each(|&x| b.push(x));
             assert_eq!(a.extras(), b.extras());
         }
+    }
+
+    #[test]
+    fn push_split_is_push_and_weights_are_the_composed_ones() {
+        // Below u, split, exact powers, over the top of fixed cascades, and u != 1.
+        let xs = [0.3, 9.0, 1e6, 0.0, 2.5, 64.0, 1e-3, 7e4, 8.0, 32768.0, 4e5];
+        let u_half = ZirrParams { u: 0.5, ..fixed(4) };
+        for p in [ZirrParams::PAPER, fixed(3), fixed(1), u_half] {
+            let (mut a, mut b) = (Zirr::new(p).unwrap(), Zirr::new(p).unwrap());
+            a.push_slice(&xs);
+            for &x in &xs {
+                match b.push_split(x) {
+                    Splat::Whole { .. } | Splat::Split { .. } => {}
+                    Splat::Clamped { .. } => panic!("zirr never clamps"),
+                }
+            }
+            assert_eq!(a.extras(), b.extras());
+            assert_eq!(b.weights().unwrap(), floats(&a.extras(), "w"));
+            let block = [None, None, None, None, Some(&a), None, None, Some(&b), None];
+            assert_eq!(
+                Zirr::block_weights(&block).unwrap(),
+                floats(&Zirr::block_estimate(&block).unwrap().1, "w")
+            );
+        }
+        for p in [
+            ZirrParams::REFERENCE,
+            ZirrParams {
+                u: 0.5,
+                ..ZirrParams::REFERENCE
+            },
+        ] {
+            let (mut a, mut b) = (ZirrRef::new(p).unwrap(), ZirrRef::new(p).unwrap());
+            a.push_slice(&xs);
+            let mut clamped = 0;
+            for &x in &xs {
+                if let Splat::Clamped { v, .. } = b.push_split(x) {
+                    assert!(v <= x);
+                    clamped += 1;
+                }
+            }
+            assert!(clamped > 0);
+            assert_eq!(a.extras(), b.extras());
+            assert_eq!(b.weights().unwrap(), floats(&b.extras(), "w"));
+            let block = [Some(&b), None, None, None, Some(&a), None, None, None, None];
+            assert_eq!(
+                ZirrRef::block_weights(&block).unwrap(),
+                floats(&ZirrRef::block_estimate(&block).unwrap().1, "w")
+            );
+        }
+        assert!(Zirr::new(ZirrParams::PAPER).unwrap().weights().is_err());
     }
 
     #[test]

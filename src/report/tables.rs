@@ -335,7 +335,7 @@ pub struct Manifest<'a> {
 }
 
 /// The commit the binary was built from (recorded by `build.rs`), if built from a checkout.
-fn git_commit() -> Option<String> {
+pub fn git_commit() -> Option<String> {
     let commit = env!("FIREFLIES_GIT_COMMIT");
     (!commit.is_empty()).then(|| commit.to_string())
 }

@@ -1,0 +1,607 @@
+//! Estimators of an RGB pixel, for the path tracer's film.
+//!
+//! The film feeds each pixel's RGB samples (`[f64; 3]`, finite and non-negative, validated by
+//! the caller) to the estimators an [`EstimatorSpec`] names, built by [`build_rgb`]. As the
+//! project's issue puts it: "MoN-family estimators run per RGB channel; Zirr's cascade and
+//! Pajot's methods classify by luminance (Rec. 709 weights 0.2126, 0.7152, 0.0722) and apply
+//! their weight or decision to the RGB sample, as in their papers."
+//!
+//! * **Per channel** (`mean`, `clamp`, `mon`, `gini`, `gmonb`, `gmon`, `jung`): three scalar
+//!   estimators, one per channel; the estimate of channel `c` is the scalar estimator's estimate
+//!   of the channel-`c` stream. A block of samples is deinterleaved through a small stack
+//!   buffer (64 samples a channel, not part of the pixel's state), so each channel sees one
+//!   `push_slice` per 64 samples and no dynamic dispatch per sample. `jung` in image mode takes
+//!   one `σ_image` per channel ([`RgbEstimator::set_image_sigma`]).
+//! * **Zirr** (`zirr`, `zirr-ref`): the cascade runs on the luminance `L` of each sample, exactly
+//!   as the scalar method on the luminance stream (same `N`, buffers, counts, weights). Beside
+//!   each luminance buffer the pixel keeps an RGB buffer, into which each sample's RGB goes with
+//!   the fractions its luminance went with ([`Splat`]): `a` and `1 − a` between two buffers,
+//!   1 for a whole sample, and `c_{J−1}/L` at `zirr-ref`'s clamped top buffer ([Z] §4.2 splats
+//!   colour with luminance-derived weights). The estimate is `Σ_j w_j·B_j(RGB)` with the `w_j`
+//!   the scalar method composes from the luminance buffers (in ascending `j`, like the scalar
+//!   sum), so `luminance(estimate)` equals the scalar estimate on the luminances up to
+//!   rounding. [`RgbEstimator::block_estimate`] averages the rejection counts over the 3×3
+//!   block exactly as [`Zirr::block_estimate`] / [`ZirrRef::block_estimate`] do.
+//! * **Pajot** (`pajot-rot`, `pajot-adr`, `pajot-hybrid`): the scalar estimator runs on the
+//!   luminances; a sample is accepted iff its luminance is (black always; otherwise
+//!   `ln L ≤ m`, the final bound, read "as if learning ended now" during learning, like the
+//!   scalar estimate). The estimate is the compensated mean of the accepted RGB samples
+//!   (divisor: the accepted count; `[0, 0, 0]` when none is). Besides the scalar state the
+//!   pixel keeps the accepted RGB sums and count and the not-yet-accepted samples as a list of
+//!   `(L, rgb)` sorted by `L`, released into the sums (in ascending `L`, as the scalar ledger
+//!   does) whenever the bound grows. During learning that list holds every non-black sample
+//!   (the scalar method stores them too); afterwards only the delayed ones.
+//!
+//! # Decisions
+//!
+//! * **Luminance** is `0.2126·r + 0.7152·g + 0.0722·b`, evaluated left to right, except that a
+//!   grey sample (`r == g == b`) has luminance `r` exactly. The weights sum to 1, but the
+//!   rounded products do not always add back to `r` (they miss it for about 3 samples in 10);
+//!   with the exception a grey RGB stream is classified, split and weighted bit for bit as the
+//!   scalar stream, so grey pixels give the scalar estimate in every channel. The change is at
+//!   most an ulp, only at grey samples.
+//! * **Black** means `L == 0.0`, the scalar methods' test on the luminance. With positive
+//!   weights that happens only for `rgb = 0` — or for RGB made of a few subnormals (`0.2126 ×
+//!   5e-324` rounds to 0). Such a sample is treated as black, as its luminance says: Zirr puts
+//!   its RGB wholly into buffer 0 (where every sample below `u` goes; it counts in `N`), Pajot
+//!   accepts it and adds its RGB (at most a few subnormals) to the accepted sums.
+//! * **Sample order**: each per-channel or luminance estimator sees the samples in arrival
+//!   order, so any split of the stream into `push_slice` calls gives the same state.
+//! * **Display**: the scalar estimator's form followed by `[RGB]` (`MoN(M=21)[RGB]`); `spec()`
+//!   is the scalar spec (for `jung` after [`RgbEstimator::set_image_sigma`], with the red
+//!   channel's `σ_image`).
+//! * **State** ([`RgbEstimator::state_bytes`]): the struct plus every heap allocation held —
+//!   per channel, three scalar states; Zirr, the scalar luminance state plus 48 bytes per RGB
+//!   buffer (three compensated sums); Pajot, the scalar luminance state plus 32 bytes per
+//!   listed `(L, rgb)`.
+//!
+//! [Z]: super::zirr
+
+use super::zirr::Splat;
+use super::{
+    Clamp, Estimator, EstimatorSpec, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon, Neumaier,
+    PajotAdr, PajotHybrid, PajotRot, Zirr, ZirrRef, empty,
+};
+use crate::error::{Error, Result};
+use std::any::Any;
+use std::fmt;
+
+/// Rec. 709 luminance weights of red, green and blue.
+pub const REC709: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+/// Rec. 709 luminance `0.2126·r + 0.7152·g + 0.0722·b` (summed left to right); exactly `r` for
+/// a grey sample `r == g == b` (see the module docs).
+#[inline]
+pub fn luminance(rgb: [f64; 3]) -> f64 {
+    let [r, g, b] = rgb;
+    if r == g && g == b {
+        return r;
+    }
+    REC709[0] * r + REC709[1] * g + REC709[2] * b
+}
+
+/// A per-pixel streaming estimator of the mean of an RGB random variable.
+pub trait RgbEstimator: Send + Sync + fmt::Display {
+    /// Adds a block of samples in order. The caller guarantees every channel is finite and
+    /// non-negative.
+    fn push_slice(&mut self, samples: &[[f64; 3]]);
+
+    /// Number of samples pushed so far.
+    fn count(&self) -> u64;
+
+    /// The current estimate; an error when no sample has been pushed.
+    fn estimate(&self) -> Result<[f64; 3]>;
+
+    /// The estimate of this pixel given its 3×3 neighbourhood (row-major, index 4 = this
+    /// pixel, `None` outside the image); only Zirr uses the neighbours ([Z] §5.3.1). The
+    /// default ignores them and returns [`RgbEstimator::estimate`].
+    ///
+    /// [Z]: super::zirr
+    fn block_estimate(&self, block: &[Option<&dyn RgbEstimator>; 9]) -> Result<[f64; 3]> {
+        let _ = block;
+        self.estimate()
+    }
+
+    /// Jung's image mode: the film sets the per-channel `σ_image` (finite, `≥ 0`) before
+    /// reading estimates. A no-op for every other estimator.
+    fn set_image_sigma(&mut self, sigma: [f64; 3]) -> Result<()> {
+        let _ = sigma;
+        Ok(())
+    }
+
+    /// Bytes of per-pixel state held right now (struct plus heap).
+    fn state_bytes(&self) -> usize;
+
+    /// The scalar spec this estimator was built from.
+    fn spec(&self) -> EstimatorSpec;
+
+    /// The concrete estimator, so that Zirr can read its neighbours' cascades.
+    fn as_any(&self) -> &dyn Any;
+}
+
+/// Builds the RGB estimator for a spec (every one of the twelve names), checking every
+/// parameter as [`EstimatorSpec::build`] does.
+pub fn build_rgb(spec: &EstimatorSpec) -> Result<Box<dyn RgbEstimator>> {
+    fn per<E: Channel>(make: impl Fn() -> Result<E>) -> Result<Box<dyn RgbEstimator>> {
+        Ok(Box::new(PerChannel {
+            ch: [make()?, make()?, make()?],
+        }))
+    }
+    match *spec {
+        EstimatorSpec::Mean => per(|| Ok(Mean::new())),
+        EstimatorSpec::Clamp { c } => per(|| Clamp::new(c)),
+        EstimatorSpec::Mon { m } => per(|| Mon::new(m)),
+        EstimatorSpec::Gini { m } => per(|| GiniDiagnostic::new(m)),
+        EstimatorSpec::GmonB { m, threshold } => per(|| GmonB::new(m, threshold)),
+        EstimatorSpec::Gmon { m } => per(|| Gmon::new(m)),
+        EstimatorSpec::Jung { sigma_image, m_max } => per(|| Jung::new(sigma_image, m_max)),
+        EstimatorSpec::Zirr(p) => Ok(Box::new(ZirrRgb::new(Zirr::new(p)?))),
+        EstimatorSpec::ZirrRef(p) => Ok(Box::new(ZirrRgb::new(ZirrRef::new(p)?))),
+        EstimatorSpec::PajotRot { learn } => {
+            Ok(Box::new(PajotRgb::new(PajotRot::new(learn)?, learn)))
+        }
+        EstimatorSpec::PajotAdr { learn } => {
+            Ok(Box::new(PajotRgb::new(PajotAdr::new(learn)?, learn)))
+        }
+        EstimatorSpec::PajotHybrid { learn, t, delta } => Ok(Box::new(PajotRgb::new(
+            PajotHybrid::new(learn, t, delta)?,
+            learn,
+        ))),
+    }
+}
+
+/// The heap part of a scalar estimator's state (its struct is embedded in ours).
+fn heap_of<E: Estimator>(e: &E) -> usize {
+    e.state_bytes().saturating_sub(size_of::<E>())
+}
+
+/// The channel names, for error messages.
+const CHANNELS: [&str; 3] = ["red", "green", "blue"];
+
+// ---------------------------------------------------------------------------------------------
+// Per channel
+
+/// A scalar estimator that can run on one channel.
+trait Channel: Estimator + 'static {
+    /// Sets the per-channel `σ_image` of all three channels, checking all before changing any
+    /// (only Jung uses it).
+    fn set_sigmas(channels: &mut [Self; 3], sigma: [f64; 3]) -> Result<()>
+    where
+        Self: Sized,
+    {
+        let _ = (channels, sigma);
+        Ok(())
+    }
+}
+
+impl Channel for Mean {}
+impl Channel for Clamp {}
+impl Channel for Mon {}
+impl Channel for GiniDiagnostic {}
+impl Channel for GmonB {}
+impl Channel for Gmon {}
+
+impl Channel for Jung {
+    fn set_sigmas(channels: &mut [Self; 3], sigma: [f64; 3]) -> Result<()> {
+        for (s, name) in sigma.iter().zip(CHANNELS) {
+            if !(*s >= 0.0 && s.is_finite()) {
+                return Err(Error::param(
+                    "sigma_image",
+                    s,
+                    format!("must be finite and >= 0 (the {name} channel's)"),
+                ));
+            }
+        }
+        for (j, s) in channels.iter_mut().zip(sigma) {
+            j.set_sigma_image(s)?;
+        }
+        Ok(())
+    }
+}
+
+/// Three scalar estimators, one per channel.
+#[derive(Debug, Clone)]
+struct PerChannel<E> {
+    ch: [E; 3],
+}
+
+/// Samples per channel deinterleaved at a time (a 512-byte stack buffer).
+const CHUNK: usize = 64;
+
+impl<E: Channel> fmt::Display for PerChannel<E> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}[RGB]", self.ch[0])
+    }
+}
+
+impl<E: Channel> RgbEstimator for PerChannel<E> {
+    fn push_slice(&mut self, samples: &[[f64; 3]]) {
+        if let [one] = samples {
+            for (e, &x) in self.ch.iter_mut().zip(one) {
+                e.push(x);
+            }
+            return;
+        }
+        let mut buf = [0.0f64; CHUNK];
+        for chunk in samples.chunks(CHUNK) {
+            let buf = &mut buf[..chunk.len()];
+            for (c, e) in self.ch.iter_mut().enumerate() {
+                for (slot, px) in buf.iter_mut().zip(chunk) {
+                    *slot = px[c];
+                }
+                e.push_slice(buf);
+            }
+        }
+    }
+
+    fn count(&self) -> u64 {
+        self.ch[0].count()
+    }
+
+    fn estimate(&self) -> Result<[f64; 3]> {
+        if self.count() == 0 {
+            return Err(empty(self));
+        }
+        Ok([
+            self.ch[0].estimate()?,
+            self.ch[1].estimate()?,
+            self.ch[2].estimate()?,
+        ])
+    }
+
+    fn set_image_sigma(&mut self, sigma: [f64; 3]) -> Result<()> {
+        E::set_sigmas(&mut self.ch, sigma)
+    }
+
+    fn state_bytes(&self) -> usize {
+        size_of::<Self>() + self.ch.iter().map(heap_of).sum::<usize>()
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        self.ch[0].spec()
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Zirr
+
+/// The scalar Zirr variants' colour hooks.
+trait ZirrLike: Estimator + Sized + 'static {
+    fn push_split(&mut self, sample: f64) -> Splat;
+    fn weights(&self) -> Result<Vec<f64>>;
+    fn block_weights(block: &[Option<&Self>; 9]) -> Result<Vec<f64>>;
+}
+
+impl ZirrLike for Zirr {
+    fn push_split(&mut self, sample: f64) -> Splat {
+        Zirr::push_split(self, sample)
+    }
+    fn weights(&self) -> Result<Vec<f64>> {
+        Zirr::weights(self)
+    }
+    fn block_weights(block: &[Option<&Self>; 9]) -> Result<Vec<f64>> {
+        Zirr::block_weights(block)
+    }
+}
+
+impl ZirrLike for ZirrRef {
+    fn push_split(&mut self, sample: f64) -> Splat {
+        ZirrRef::push_split(self, sample)
+    }
+    fn weights(&self) -> Result<Vec<f64>> {
+        ZirrRef::weights(self)
+    }
+    fn block_weights(block: &[Option<&Self>; 9]) -> Result<Vec<f64>> {
+        ZirrRef::block_weights(block)
+    }
+}
+
+/// Zirr's cascade on the luminance, with an RGB buffer beside each luminance buffer.
+#[derive(Debug, Clone)]
+struct ZirrRgb<Z> {
+    /// The scalar method on the luminance stream: `N`, luminance buffers, weights.
+    lum: Z,
+    /// Compensated RGB sums `A_j(RGB)`, grown as the samples reach higher buffers (a buffer
+    /// the luminance cascade has but no sample reached yet is absent here, i.e. zero).
+    rgb: Vec<[Neumaier; 3]>,
+}
+
+impl<Z: ZirrLike> ZirrRgb<Z> {
+    fn new(lum: Z) -> Self {
+        ZirrRgb {
+            lum,
+            rgb: Vec::new(),
+        }
+    }
+
+    /// The buffers `0..len` as `&mut`, grown (exactly) if needed.
+    #[inline]
+    fn buffers(&mut self, len: usize) -> &mut [[Neumaier; 3]] {
+        if self.rgb.len() < len {
+            self.rgb.reserve_exact(len - self.rgb.len());
+            self.rgb.resize(len, [Neumaier::new(); 3]);
+        }
+        &mut self.rgb[..len]
+    }
+
+    /// `Σ_j w_j·B_j(RGB)`, in ascending `j` as the scalar compose sums.
+    fn compose(&self, weights: &[f64]) -> [f64; 3] {
+        let nf = self.lum.count() as f64;
+        let mut e = [0.0f64; 3];
+        for (w, acc) in weights.iter().zip(&self.rgb) {
+            for c in 0..3 {
+                e[c] += w * (acc[c].value() / nf);
+            }
+        }
+        e
+    }
+}
+
+impl<Z: ZirrLike> fmt::Display for ZirrRgb<Z> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}[RGB]", self.lum)
+    }
+}
+
+impl<Z: ZirrLike> RgbEstimator for ZirrRgb<Z> {
+    fn push_slice(&mut self, samples: &[[f64; 3]]) {
+        for &px in samples {
+            let l = luminance(px);
+            match self.lum.push_split(l) {
+                Splat::Whole { j } => {
+                    let acc = &mut self.buffers(j + 1)[j];
+                    for c in 0..3 {
+                        acc[c].add(px[c]);
+                    }
+                }
+                Splat::Split { j, a } => {
+                    let bufs = self.buffers(j + 2);
+                    for c in 0..3 {
+                        let part = a * px[c];
+                        bufs[j][c].add(part);
+                        bufs[j + 1][c].add(px[c] - part);
+                    }
+                }
+                Splat::Clamped { j, v } => {
+                    // l >= c_{J-1} > 0: each channel keeps the fraction v/l of itself.
+                    let acc = &mut self.buffers(j + 1)[j];
+                    for c in 0..3 {
+                        acc[c].add(v * (px[c] / l));
+                    }
+                }
+            }
+        }
+    }
+
+    fn count(&self) -> u64 {
+        self.lum.count()
+    }
+
+    fn estimate(&self) -> Result<[f64; 3]> {
+        if self.count() == 0 {
+            return Err(empty(self));
+        }
+        Ok(self.compose(&self.lum.weights()?))
+    }
+
+    /// The 3×3 estimate ([Z] §5.3.1): index 4 is taken to be this pixel whatever the block
+    /// holds there; every other present pixel must be the same kind of RGB estimator (an error
+    /// names its index otherwise) and, as in the scalar method, have the same parameters.
+    ///
+    /// [Z]: super::zirr
+    fn block_estimate(&self, block: &[Option<&dyn RgbEstimator>; 9]) -> Result<[f64; 3]> {
+        let mut lum: [Option<&Z>; 9] = [None; 9];
+        for (k, (slot, px)) in lum.iter_mut().zip(block).enumerate() {
+            if k == 4 {
+                *slot = Some(&self.lum);
+                continue;
+            }
+            let Some(px) = px else { continue };
+            let Some(z) = px.as_any().downcast_ref::<Self>() else {
+                return Err(Error::param(
+                    "block index",
+                    k,
+                    format!(
+                        "pixel {k} is {px} but the centre is {self}; all pixels of a block \
+                         must be the same RGB estimator"
+                    ),
+                ));
+            };
+            *slot = Some(&z.lum);
+        }
+        Ok(self.compose(&Z::block_weights(&lum)?))
+    }
+
+    fn state_bytes(&self) -> usize {
+        size_of::<Self>() + heap_of(&self.lum) + self.rgb.capacity() * size_of::<[Neumaier; 3]>()
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        self.lum.spec()
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pajot
+
+/// The scalar Pajot estimators' acceptance bound.
+trait PajotLike: Estimator + 'static {
+    /// The acceptance bound `m` (log units), as if learning ended now.
+    fn bound(&self) -> f64;
+}
+
+impl PajotLike for PajotRot {
+    fn bound(&self) -> f64 {
+        PajotRot::bound(self)
+    }
+}
+
+impl PajotLike for PajotAdr {
+    fn bound(&self) -> f64 {
+        PajotAdr::bound(self)
+    }
+}
+
+impl PajotLike for PajotHybrid {
+    fn bound(&self) -> f64 {
+        PajotHybrid::bound(self)
+    }
+}
+
+/// Pajot's method on the luminance; accepted RGB samples are averaged.
+#[derive(Debug, Clone)]
+struct PajotRgb<P> {
+    /// The scalar method on the luminance stream (decides acceptance).
+    lum: P,
+    /// The learning-phase length.
+    learn: u64,
+    /// The bound the list was last released against (after learning).
+    m: f64,
+    /// Compensated sums of the accepted RGB samples.
+    sum: [Neumaier; 3],
+    /// Accepted samples, black ones included.
+    accepted: u64,
+    /// Samples not accepted yet, `(L, rgb)` ascending in `L`: every non-black sample during
+    /// learning, the delayed ones afterwards.
+    pending: Vec<(f64, [f64; 3])>,
+}
+
+impl<P: PajotLike> PajotRgb<P> {
+    fn new(lum: P, learn: usize) -> Self {
+        PajotRgb {
+            lum,
+            learn: u64::try_from(learn).unwrap_or(u64::MAX),
+            m: f64::NEG_INFINITY,
+            sum: [Neumaier::new(); 3],
+            accepted: 0,
+            pending: Vec::new(),
+        }
+    }
+
+    #[inline]
+    fn accept(sum: &mut [Neumaier; 3], accepted: &mut u64, px: [f64; 3]) {
+        for c in 0..3 {
+            sum[c].add(px[c]);
+        }
+        *accepted += 1;
+    }
+
+    fn delay(&mut self, l: f64, px: [f64; 3]) {
+        if self.pending.capacity() == 0 && self.lum.count() <= self.learn {
+            self.pending
+                .reserve_exact(usize::try_from(self.learn).unwrap_or(usize::MAX).min(1024));
+        }
+        let at = self.pending.partition_point(|&(x, _)| x <= l);
+        self.pending.insert(at, (l, px));
+    }
+
+    /// Accepts the listed samples with `ln L ≤ m`, in ascending `L` (as the scalar ledger).
+    fn release(&mut self) {
+        let m = self.m;
+        let k = self.pending.partition_point(|&(l, _)| l.ln() <= m);
+        if k == 0 {
+            return;
+        }
+        for &(_, px) in &self.pending[..k] {
+            Self::accept(&mut self.sum, &mut self.accepted, px);
+        }
+        self.pending.drain(..k);
+        if self.pending.capacity() > 16 && self.pending.len() * 4 < self.pending.capacity() {
+            self.pending.shrink_to(self.pending.len() * 2);
+        }
+    }
+
+    fn push_one(&mut self, px: [f64; 3]) {
+        let l = luminance(px);
+        self.lum.push(l);
+        let n = self.lum.count();
+        if n <= self.learn {
+            // Learning: black samples are accepted on arrival, the rest wait for its end.
+            if l == 0.0 {
+                Self::accept(&mut self.sum, &mut self.accepted, px);
+            } else {
+                self.delay(l, px);
+            }
+            if n == self.learn {
+                self.m = self.lum.bound();
+                self.release();
+            }
+            return;
+        }
+        let m = self.lum.bound();
+        if m != self.m {
+            // m never decreases: the list releases its samples now at or below it.
+            self.m = m;
+            self.release();
+        }
+        if l == 0.0 || l.ln() <= m {
+            Self::accept(&mut self.sum, &mut self.accepted, px);
+        } else {
+            self.delay(l, px);
+        }
+    }
+}
+
+impl<P: PajotLike> fmt::Display for PajotRgb<P> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}[RGB]", self.lum)
+    }
+}
+
+impl<P: PajotLike> RgbEstimator for PajotRgb<P> {
+    fn push_slice(&mut self, samples: &[[f64; 3]]) {
+        for &px in samples {
+            self.push_one(px);
+        }
+    }
+
+    fn count(&self) -> u64 {
+        self.lum.count()
+    }
+
+    fn estimate(&self) -> Result<[f64; 3]> {
+        let n = self.count();
+        if n == 0 {
+            return Err(empty(self));
+        }
+        let (mut sum, mut accepted) = (self.sum, self.accepted);
+        if n < self.learn {
+            // As if learning ended now: the scalar bound of a settled copy, applied to the
+            // stored samples in ascending L; the state is unchanged.
+            let m = self.lum.bound();
+            for &(l, px) in &self.pending {
+                if !(l.ln() <= m) {
+                    break;
+                }
+                Self::accept(&mut sum, &mut accepted, px);
+            }
+        }
+        if accepted == 0 {
+            return Ok([0.0; 3]);
+        }
+        let k = accepted as f64;
+        Ok(sum.map(|s| s.value() / k))
+    }
+
+    fn state_bytes(&self) -> usize {
+        size_of::<Self>()
+            + heap_of(&self.lum)
+            + self.pending.capacity() * size_of::<(f64, [f64; 3])>()
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        self.lum.spec()
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}

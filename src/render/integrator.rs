@@ -1,0 +1,148 @@
+//! Unidirectional path tracing with next-event estimation, multiple importance sampling
+//! (power heuristic) and Russian roulette, following Mitsuba 3's `path` integrator so that the
+//! expected value of every pixel is Mitsuba's for the same `max_depth` (Russian roulette and
+//! the emitter choice only change variance).
+//!
+//! Mitsuba's conventions kept here: depth counts path segments, so `max_depth = 1` shows
+//! emitters only and `2` adds direct light; next-event estimation runs only at BSDFs with a
+//! smooth (non-delta) lobe; an emitter hit after a delta bounce, or seen directly, has MIS weight
+//! 1; roulette runs after a bounce once the incremented `depth ≥ rr_depth`, survives with `min(max(β)·η², 0.95)`.
+
+use super::sampler::SampleStream;
+use super::sampling::{Frame, power_heuristic};
+use super::scene::Rgb;
+use super::shapes::{Hit, Ray};
+use super::world::World;
+use glam::Vec3;
+
+/// Largest survival probability of Russian roulette (Mitsuba's).
+const RR_MAX_SURVIVAL: f32 = 0.95;
+
+/// Relative size of the offset that keeps a spawned ray off the surface it leaves.
+const RAY_OFFSET: f32 = 1e-4;
+
+/// A ray leaving `hit` in direction `d`, pushed off the surface to the side `d` goes to.
+#[inline]
+fn spawn(hit: &Hit, d: Vec3) -> Ray {
+    let scale = RAY_OFFSET * (1.0 + hit.p.abs().max_element());
+    let side = if hit.ng.dot(d) >= 0.0 { scale } else { -scale };
+    Ray {
+        o: hit.p + hit.ng * side,
+        d,
+    }
+}
+
+/// The shadow ray from `hit` towards the emitter point `dist` away along `wi` (or towards
+/// infinity), and how far it may go: it starts off the surface and stops short of the emitter by
+/// the same relative margin, so neither end can occlude it.
+#[inline]
+fn shadow_ray(hit: &Hit, wi: Vec3, dist: f32) -> (Ray, f32) {
+    let ray = spawn(hit, wi);
+    if !dist.is_finite() {
+        return (ray, f32::INFINITY);
+    }
+    let target = hit.p + wi * dist;
+    let to = target - ray.o;
+    let len = to.length();
+    let margin = RAY_OFFSET * (1.0 + target.abs().max_element());
+    let ray = Ray { o: ray.o, d: to / len };
+    (ray, (len - margin).max(0.0))
+}
+
+/// The radiance of one camera sample of pixel `(x, y)`, drawn from `rng`.
+pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
+    let cam = world.camera.ray(x, y, rng.next_2d());
+    let (mut ray, mut tmin, mut tmax) = (cam.ray, cam.tmin, cam.tmax);
+    let max_depth = world.integrator.max_depth.unwrap_or(u32::MAX);
+    let rr_depth = world.integrator.rr_depth;
+    let lights = &world.lights;
+
+    let mut result = Rgb::ZERO;
+    let mut beta = Rgb::ONE;
+    let mut eta = 1.0f32;
+    let mut depth = 0u32;
+    // The previous vertex, for MIS of emitters hit by BSDF sampling.
+    let mut prev_p = ray.o;
+    let mut prev_pdf = 1.0f32;
+    let mut prev_delta = true;
+
+    loop {
+        let Some(hit) = world.bvh.intersect(&ray, tmin, tmax) else {
+            if let Some(le) = lights.environment() {
+                let w = if prev_delta {
+                    1.0
+                } else {
+                    power_heuristic(prev_pdf, lights.pdf_environment())
+                };
+                result += beta * w * le;
+            }
+            break;
+        };
+        if let Some(le) = lights.emitted(hit.shape, hit.ng, ray.d) {
+            let w = if prev_delta {
+                1.0
+            } else {
+                let pdf = lights.pdf_area_hit(hit.shape, prev_p, hit.p, hit.ng);
+                power_heuristic(prev_pdf, pdf)
+            };
+            result += beta * w * le;
+        }
+        if depth + 1 >= max_depth {
+            break;
+        }
+
+        let frame = Frame::new(hit.ns);
+        let wi = frame.to_local(-ray.d);
+        let bsdf = &world.bsdfs[hit.shape as usize];
+
+        // Next-event estimation.
+        let u_choice = rng.next_1d();
+        let u_light = rng.next_2d();
+        if bsdf.has_smooth_lobe() {
+            if let Some(ls) = lights.sample(hit.p, u_choice, u_light) {
+                let wo = frame.to_local(ls.wi);
+                let (f, bsdf_pdf) = bsdf.eval_pdf(wi, wo);
+                if f.max_element() > 0.0 {
+                    let (shadow, dist) = shadow_ray(&hit, ls.wi, ls.dist);
+                    if !world.bvh.occluded(&shadow, 0.0, dist) {
+                        let w = if ls.delta {
+                            1.0
+                        } else {
+                            power_heuristic(ls.pdf, bsdf_pdf)
+                        };
+                        result += beta * f * ls.radiance * (w / ls.pdf);
+                    }
+                }
+            }
+        }
+
+        // BSDF sampling.
+        let u_lobe = rng.next_1d();
+        let u_dir = rng.next_2d();
+        let Some(bs) = bsdf.sample(wi, u_lobe, u_dir) else {
+            break;
+        };
+        let d = frame.to_world(bs.wo).normalize();
+        beta *= bs.weight;
+        eta *= bs.eta;
+        prev_p = hit.p;
+        prev_pdf = bs.pdf;
+        prev_delta = bs.delta;
+        ray = spawn(&hit, d);
+        (tmin, tmax) = (0.0, f32::INFINITY);
+
+        depth += 1;
+        let beta_max = beta.max_element();
+        if !(beta_max > 0.0) {
+            break;
+        }
+        if depth >= rr_depth {
+            let q = (beta_max * eta * eta).min(RR_MAX_SURVIVAL);
+            if rng.next_1d() >= q {
+                break;
+            }
+            beta /= q;
+        }
+    }
+    result
+}

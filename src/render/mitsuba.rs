@@ -1,0 +1,1836 @@
+//! Loads the subset of Mitsuba 3's XML scene format that the renderer models into a [`SceneDesc`].
+//!
+//! The renderer is a reference for comparisons against Mitsuba, so a scene that loads but means
+//! something slightly different from what Mitsuba would render is worse than one that does not
+//! load at all. The loader is therefore strict: every element, plugin type and parameter outside
+//! the subset below, every misspelt or unused parameter, every parameter given twice and every
+//! value of the wrong kind is an [`Error::Scene`] naming the file, the line, the element and the
+//! offending value. Where Mitsuba's default is something the renderer does not model (a gaussian
+//! reconstruction filter, a Beckmann microfacet distribution), the parameter must be given
+//! explicitly.
+//!
+//! The subset, with Mitsuba 3's semantics and defaults:
+//!
+//! * `<scene version="3.x.y">` with `<default name value>` and `$name` substitution in attribute
+//!   values; `id` on top-level objects and `<ref id>` to a BSDF declared earlier;
+//! * values `float`, `integer`, `boolean`, `string`, `rgb`, `point`, `vector` and
+//!   `transform` (`translate`, `rotate`, `scale`, `matrix`, `lookat`, each left-multiplied);
+//!   spectrum parameters also take a `float` (grey);
+//! * shapes `rectangle`, `cube`, `sphere`, `disk`, `obj`, each with at most one BSDF and one
+//!   `area` emitter;
+//! * BSDFs `diffuse`, `conductor` and `roughconductor` (`material="none"` only, GGX only),
+//!   `dielectric` and `twosided`;
+//! * emitters `point` and `constant` at the top level;
+//! * one `perspective` sensor with an `hdrfilm` (explicit `box` filter) and an `independent`
+//!   sampler, and an optional `path` integrator.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use glam::{Mat3, Mat4, Vec3, Vec4};
+use roxmltree::{Document, Node, NodeType};
+
+use super::scene::{
+    BsdfDesc, CameraDesc, FovAxis, GeometryDesc, IntegratorDesc, MeshDesc, PointLightDesc, Rgb,
+    SceneDesc, ShapeDesc,
+};
+use crate::error::{Error, Result};
+
+/// Loads a Mitsuba 3 scene file; `obj` files it names are resolved relative to its folder.
+///
+/// Reading failures are [`Error::Io`]; everything the loader rejects is [`Error::Scene`].
+pub fn load_file(path: &Path) -> Result<SceneDesc> {
+    let xml = std::fs::read_to_string(path).map_err(|err| Error::io(path.display(), &err))?;
+    let base_dir = path.parent().unwrap_or_else(|| Path::new(""));
+    load_str(&xml, base_dir, &path.display().to_string())
+}
+
+/// Loads a Mitsuba 3 scene from its text; `obj` files are resolved relative to `base_dir` and
+/// `source` is the file name used in error messages.
+pub fn load_str(xml: &str, base_dir: &Path, source: &str) -> Result<SceneDesc> {
+    let doc = Document::parse(xml).map_err(|err| Error::Scene {
+        file: source.to_string(),
+        line: err.pos().row,
+        element: "xml".to_string(),
+        message: format!("malformed XML: {err}"),
+    })?;
+    let mut loader = Loader {
+        doc: &doc,
+        file: source,
+        base_dir,
+        defaults: HashMap::new(),
+        bsdfs: HashMap::new(),
+        ids: HashMap::new(),
+    };
+    loader.scene(doc.root_element())
+}
+
+/// Tags of value elements (Mitsuba's "properties"); every other child of a plugin is an object.
+const VALUE_TAGS: &[&str] = &[
+    "float",
+    "integer",
+    "boolean",
+    "string",
+    "rgb",
+    "point",
+    "vector",
+    "transform",
+];
+
+/// Tags of nested objects that some plugin of the subset accepts.
+const OBJECT_TAGS: &[&str] = &["bsdf", "emitter", "ref", "film", "sampler", "rfilter"];
+
+/// Mitsuba's named indices of refraction (its `lookup_ior` table).
+const NAMED_IORS: &[(&str, f32)] = &[
+    ("vacuum", 1.0),
+    ("helium", 1.00004),
+    ("hydrogen", 1.00013),
+    ("air", 1.000277),
+    ("carbon dioxide", 1.00045),
+    ("water", 1.3330),
+    ("acetone", 1.36),
+    ("ethanol", 1.361),
+    ("carbon tetrachloride", 1.461),
+    ("glycerol", 1.4729),
+    ("benzene", 1.501),
+    ("silicone oil", 1.52045),
+    ("bromine", 1.661),
+    ("water ice", 1.31),
+    ("fused quartz", 1.458),
+    ("pyrex", 1.470),
+    ("acrylic glass", 1.49),
+    ("polypropylene", 1.49),
+    ("bk7", 1.5046),
+    ("sodium chloride", 1.544),
+    ("amber", 1.55),
+    ("pet", 1.5750),
+    ("diamond", 2.419),
+];
+
+/// Mitsuba's `hdrfilm` pixel formats; accepted and ignored (they do not change pixel values).
+const PIXEL_FORMATS: &[&str] = &["luminance", "luminance_alpha", "rgb", "rgba", "xyz", "xyza"];
+
+/// Mitsuba's `hdrfilm` component formats; accepted and ignored.
+const COMPONENT_FORMATS: &[&str] = &["float16", "float32", "uint32"];
+
+/// Relative tolerance for "uniform scale" and "no scale" checks on transforms (f32 input).
+const SIMILARITY_TOLERANCE: f32 = 1e-4;
+
+/// A value with the element it came from, so that range checks can point at that element.
+type At<'a, 'i, T> = Option<(T, Node<'a, 'i>)>;
+
+/// The value of an optional parameter, or its default.
+fn value_or<T>(at: At<'_, '_, T>, default: T) -> T {
+    at.map_or(default, |(value, _)| value)
+}
+
+/// How an element is named in messages: its tag and its `type` (or `name`, or `id`) attribute,
+/// as written in the file.
+fn describe(node: Node) -> String {
+    let tag = node.tag_name().name();
+    let keys: &[&str] = if tag == "ref" {
+        &["id", "name"]
+    } else {
+        &["type", "name", "id"]
+    };
+    keys.iter()
+        .find_map(|key| {
+            node.attribute(*key)
+                .map(|value| format!("{tag} {key}=\"{value}\""))
+        })
+        .unwrap_or_else(|| tag.to_string())
+}
+
+/// `a, b, c` for messages.
+fn list(items: &[&str]) -> String {
+    items.join(", ")
+}
+
+/// Edit distance, to suggest the intended name of a misspelt parameter.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let substitution = diagonal + usize::from(ca != *cb);
+            diagonal = row[j + 1];
+            row[j + 1] = substitution.min(row[j] + 1).min(diagonal + 1);
+        }
+    }
+    row[b.len()]
+}
+
+/// One value element of a plugin, and whether the plugin asked for it.
+struct Param<'a, 'i> {
+    /// The `name` attribute (after `$` substitution).
+    name: String,
+    /// The element, for messages and for reading its value.
+    node: Node<'a, 'i>,
+    /// Set once the plugin has queried this name.
+    used: bool,
+}
+
+/// The parameters and nested objects of one plugin element.
+///
+/// Like Mitsuba's `Properties` (which warns about unqueried properties) and pbrt-v4's
+/// `ReportUnused`, it records every name the plugin asks for; whatever was given but never
+/// asked for is reported by [`Props::finish`] as an error. This is what turns a misspelt
+/// parameter (`reflectanse`) into an error instead of a silently used default, without each
+/// plugin having to list its parameters twice. The recorded names double as the list of
+/// supported parameters in the message.
+struct Props<'a, 'i> {
+    /// The plugin element.
+    owner: Node<'a, 'i>,
+    /// Its value elements, in document order.
+    params: Vec<Param<'a, 'i>>,
+    /// Its nested objects in document order, each with a flag set once the plugin took it.
+    objects: Vec<(Node<'a, 'i>, bool)>,
+    /// Every parameter name the plugin queried, in query order.
+    known: Vec<&'static str>,
+}
+
+impl<'a, 'i> Props<'a, 'i> {
+    /// Sorts the children of `owner` into values and objects; rejects unknown tags, malformed
+    /// value elements and a name given twice.
+    fn collect(ld: &Loader<'a, 'i>, owner: Node<'a, 'i>) -> Result<Self> {
+        let mut params: Vec<Param<'a, 'i>> = Vec::new();
+        let mut objects = Vec::new();
+        for child in ld.elements(owner)? {
+            let tag = child.tag_name().name();
+            if VALUE_TAGS.contains(&tag) {
+                let allowed: &[&str] = match tag {
+                    "point" | "vector" => &["name", "value", "x", "y", "z"],
+                    "transform" => &["name"],
+                    _ => &["name", "value"],
+                };
+                ld.check_attrs(child, allowed)?;
+                let name = ld.required_attr(child, "name")?;
+                if tag != "transform" {
+                    ld.leaf(child)?;
+                }
+                if let Some(first) = params.iter().find(|p| p.name == name) {
+                    return Err(ld.err(
+                        child,
+                        format!(
+                            "parameter \"{name}\" given twice in <{}> (first at line {})",
+                            describe(owner),
+                            ld.line(first.node)
+                        ),
+                    ));
+                }
+                params.push(Param {
+                    name,
+                    node: child,
+                    used: false,
+                });
+            } else if OBJECT_TAGS.contains(&tag) {
+                objects.push((child, false));
+            } else {
+                return Err(ld.err(
+                    child,
+                    format!(
+                        "unsupported element <{tag}> inside <{}> (line {})",
+                        describe(owner),
+                        ld.line(owner)
+                    ),
+                ));
+            }
+        }
+        Ok(Props {
+            owner,
+            params,
+            objects,
+            known: Vec::new(),
+        })
+    }
+
+    /// Marks `name` as supported and returns its element, if given.
+    fn take(&mut self, name: &'static str) -> Option<Node<'a, 'i>> {
+        if !self.known.contains(&name) {
+            self.known.push(name);
+        }
+        let param = self.params.iter_mut().find(|p| p.name == name)?;
+        param.used = true;
+        Some(param.node)
+    }
+
+    /// Like [`Props::take`], and checks that the element is one of the value `kinds`.
+    fn typed(
+        &mut self,
+        ld: &Loader<'a, 'i>,
+        name: &'static str,
+        kinds: &[&str],
+    ) -> Result<Option<Node<'a, 'i>>> {
+        let Some(node) = self.take(name) else {
+            return Ok(None);
+        };
+        let tag = node.tag_name().name();
+        if kinds.contains(&tag) {
+            return Ok(Some(node));
+        }
+        let wanted: Vec<String> = kinds.iter().map(|k| format!("<{k}>")).collect();
+        Err(ld.err(
+            node,
+            format!(
+                "parameter \"{name}\" of <{}> must be given as {}, not <{tag}>",
+                describe(self.owner),
+                wanted.join(" or ")
+            ),
+        ))
+    }
+
+    /// A `<float>` parameter.
+    fn float(&mut self, ld: &Loader<'a, 'i>, name: &'static str) -> Result<At<'a, 'i, f32>> {
+        let Some(node) = self.typed(ld, name, &["float"])? else {
+            return Ok(None);
+        };
+        let text = ld.required_attr(node, "value")?;
+        Ok(Some((ld.number(node, "value", &text)?, node)))
+    }
+
+    /// An `<integer>` parameter.
+    fn integer(&mut self, ld: &Loader<'a, 'i>, name: &'static str) -> Result<At<'a, 'i, i64>> {
+        let Some(node) = self.typed(ld, name, &["integer"])? else {
+            return Ok(None);
+        };
+        let text = ld.required_attr(node, "value")?;
+        let value = text
+            .trim()
+            .parse::<i64>()
+            .map_err(|_| ld.err(node, format!("value=\"{text}\" is not an integer")))?;
+        Ok(Some((value, node)))
+    }
+
+    /// A `<boolean>` parameter (`true` or `false`, in any case, as Mitsuba reads it).
+    fn boolean(&mut self, ld: &Loader<'a, 'i>, name: &'static str) -> Result<At<'a, 'i, bool>> {
+        let Some(node) = self.typed(ld, name, &["boolean"])? else {
+            return Ok(None);
+        };
+        let text = ld.required_attr(node, "value")?;
+        let value = match text.trim().to_ascii_lowercase().as_str() {
+            "true" => true,
+            "false" => false,
+            _ => {
+                return Err(ld.err(
+                    node,
+                    format!("value=\"{text}\" is not a boolean (true or false)"),
+                ));
+            }
+        };
+        Ok(Some((value, node)))
+    }
+
+    /// A `<string>` parameter.
+    fn string(&mut self, ld: &Loader<'a, 'i>, name: &'static str) -> Result<At<'a, 'i, String>> {
+        let Some(node) = self.typed(ld, name, &["string"])? else {
+            return Ok(None);
+        };
+        Ok(Some((ld.required_attr(node, "value")?, node)))
+    }
+
+    /// A spectrum parameter: `<rgb>` (one number means grey) or `<float>` (grey); negative
+    /// components are rejected.
+    fn spectrum(&mut self, ld: &Loader<'a, 'i>, name: &'static str) -> Result<At<'a, 'i, Rgb>> {
+        let Some(node) = self.typed(ld, name, &["rgb", "float"])? else {
+            return Ok(None);
+        };
+        let text = ld.required_attr(node, "value")?;
+        let value = if node.tag_name().name() == "float" {
+            Rgb::splat(ld.number(node, "value", &text)?)
+        } else {
+            match ld.numbers(node, "value", &text)?.as_slice() {
+                [grey] => Rgb::splat(*grey),
+                [r, g, b] => Rgb::new(*r, *g, *b),
+                other => {
+                    return Err(ld.err(
+                        node,
+                        format!(
+                            "value=\"{text}\" must hold 1 or 3 numbers, found {}",
+                            other.len()
+                        ),
+                    ));
+                }
+            }
+        };
+        if value.min_element() < 0.0 {
+            return Err(ld.err(node, format!("value=\"{text}\" has a negative component")));
+        }
+        Ok(Some((value, node)))
+    }
+
+    /// A `<point>` parameter (`value="x, y, z"` or `x`/`y`/`z` attributes defaulting to 0).
+    fn point(&mut self, ld: &Loader<'a, 'i>, name: &'static str) -> Result<At<'a, 'i, Vec3>> {
+        let Some(node) = self.typed(ld, name, &["point"])? else {
+            return Ok(None);
+        };
+        Ok(Some((ld.xyz(node, 0.0)?, node)))
+    }
+
+    /// A `<transform>` parameter.
+    fn transform(&mut self, ld: &Loader<'a, 'i>, name: &'static str) -> Result<At<'a, 'i, Mat4>> {
+        let Some(node) = self.typed(ld, name, &["transform"])? else {
+            return Ok(None);
+        };
+        Ok(Some((ld.transform(node)?, node)))
+    }
+
+    /// An index of refraction: a `<float>` or a `<string>` naming a material in Mitsuba's table.
+    fn ior(&mut self, ld: &Loader<'a, 'i>, name: &'static str) -> Result<At<'a, 'i, f32>> {
+        let Some(node) = self.typed(ld, name, &["float", "string"])? else {
+            return Ok(None);
+        };
+        let text = ld.required_attr(node, "value")?;
+        let value = if node.tag_name().name() == "float" {
+            ld.number(node, "value", &text)?
+        } else {
+            let key = text.trim().to_ascii_lowercase();
+            let Some(&(_, ior)) = NAMED_IORS.iter().find(|(n, _)| *n == key) else {
+                let names: Vec<&str> = NAMED_IORS.iter().map(|(n, _)| *n).collect();
+                return Err(ld.err(
+                    node,
+                    format!(
+                        "unknown index of refraction \"{text}\"; known names: {}",
+                        list(&names)
+                    ),
+                ));
+            };
+            ior
+        };
+        if !(value > 0.0) {
+            return Err(ld.err(
+                node,
+                format!("value=\"{text}\": an index of refraction must be > 0"),
+            ));
+        }
+        Ok(Some((value, node)))
+    }
+
+    /// Rejects a Mitsuba parameter of this plugin that the renderer does not model, saying why
+    /// (more helpful than "unknown parameter" for names that are valid in Mitsuba).
+    fn reject(&mut self, ld: &Loader<'a, 'i>, name: &str, why: &str) -> Result<()> {
+        match self.params.iter().find(|p| p.name == name) {
+            Some(param) => Err(ld.err(
+                param.node,
+                format!(
+                    "parameter \"{name}\" of <{}> is not supported: {why}",
+                    describe(self.owner)
+                ),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// Takes the nested objects whose tag is one of `tags`, in document order.
+    fn objects(&mut self, tags: &[&str]) -> Vec<Node<'a, 'i>> {
+        self.objects
+            .iter_mut()
+            .filter(|(node, _)| tags.contains(&node.tag_name().name()))
+            .map(|(node, used)| {
+                *used = true;
+                *node
+            })
+            .collect()
+    }
+
+    /// Fails on the first (in document order) value or object the plugin did not take.
+    fn finish(&self, ld: &Loader<'a, 'i>) -> Result<()> {
+        let param = self.params.iter().find(|p| !p.used);
+        let object = self.objects.iter().find(|(_, used)| !used).map(|(n, _)| *n);
+        let owner = format!("<{}> (line {})", describe(self.owner), ld.line(self.owner));
+        match (param, object) {
+            (Some(param), object)
+                if object.is_none_or(|o| param.node.range().start < o.range().start) =>
+            {
+                let name = &param.name;
+                let supported = if self.known.is_empty() {
+                    "it takes no parameters".to_string()
+                } else {
+                    format!("supported parameters: {}", list(&self.known))
+                };
+                let hint = self
+                    .known
+                    .iter()
+                    .filter(|k| edit_distance(k, name) <= 2)
+                    .min_by_key(|k| edit_distance(k, name))
+                    .map(|k| format!(" (did you mean \"{k}\"?)"))
+                    .unwrap_or_default();
+                Err(ld.err(
+                    param.node,
+                    format!("unknown parameter \"{name}\"{hint} for {owner}; {supported}"),
+                ))
+            }
+            (_, Some(object)) => Err(ld.err(object, format!("not allowed inside {owner}"))),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// A top-level emitter.
+enum TopEmitter {
+    /// `point`.
+    Point(PointLightDesc),
+    /// `constant`, with its radiance.
+    Constant(Rgb),
+}
+
+/// Loader state: the document, `$` defaults and the ids declared so far.
+struct Loader<'a, 'i> {
+    /// The parsed XML.
+    doc: &'a Document<'i>,
+    /// File name for messages.
+    file: &'a str,
+    /// Folder against which `obj` file names are resolved.
+    base_dir: &'a Path,
+    /// `<default>` values by name, with the line that declared them.
+    defaults: HashMap<String, (String, u32)>,
+    /// Top-level BSDFs by id, for `<ref>`.
+    bsdfs: HashMap<String, BsdfDesc>,
+    /// Every declared id, with the element and line that declared it.
+    ids: HashMap<String, (String, u32)>,
+}
+
+impl<'a, 'i> Loader<'a, 'i> {
+    /// 1-based line at which `node` starts.
+    fn line(&self, node: Node) -> u32 {
+        self.doc.text_pos_at(node.range().start).row
+    }
+
+    /// An [`Error::Scene`] about `node`.
+    fn err(&self, node: Node, message: impl Into<String>) -> Error {
+        Error::Scene {
+            file: self.file.to_string(),
+            line: self.line(node),
+            element: describe(node),
+            message: message.into(),
+        }
+    }
+
+    /// The element children of `node`; comments are skipped and stray text is an error.
+    fn elements(&self, node: Node<'a, 'i>) -> Result<Vec<Node<'a, 'i>>> {
+        let mut out = Vec::new();
+        for child in node.children() {
+            match child.node_type() {
+                NodeType::Element if child.tag_name().namespace().is_some() => {
+                    return Err(self.err(child, "namespaced elements are not part of the format"));
+                }
+                NodeType::Element => out.push(child),
+                NodeType::Text => {
+                    let raw = child.text().unwrap_or("");
+                    let text = raw.trim();
+                    if !text.is_empty() {
+                        // Report the line where the text starts, not where the whitespace does.
+                        let start = child.range().start + (raw.len() - raw.trim_start().len());
+                        return Err(Error::Scene {
+                            file: self.file.to_string(),
+                            line: self.doc.text_pos_at(start).row,
+                            element: describe(node),
+                            message: format!("unexpected text {text:?}"),
+                        });
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok(out)
+    }
+
+    /// Fails if `node` has element children.
+    fn leaf(&self, node: Node<'a, 'i>) -> Result<()> {
+        match self.elements(node)?.first() {
+            Some(child) => Err(self.err(
+                *child,
+                format!(
+                    "unexpected element inside <{}> (line {}), which takes none",
+                    describe(node),
+                    self.line(node)
+                ),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// Fails on any attribute not in `allowed`.
+    fn check_attrs(&self, node: Node, allowed: &[&str]) -> Result<()> {
+        for attr in node.attributes() {
+            if attr.namespace().is_some() || !allowed.contains(&attr.name()) {
+                let expected = if allowed.is_empty() {
+                    "it takes none".to_string()
+                } else {
+                    format!("allowed: {}", list(allowed))
+                };
+                return Err(self.err(
+                    node,
+                    format!(
+                        "unknown attribute {}=\"{}\"; {expected}",
+                        attr.name(),
+                        attr.value()
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Replaces each `$name` in an attribute value by its `<default>` value.
+    fn substitute(&self, node: Node, attr: &str, raw: &str) -> Result<String> {
+        let mut out = String::new();
+        let mut rest = raw;
+        while let Some(dollar) = rest.find('$') {
+            out.push_str(&rest[..dollar]);
+            let after = &rest[dollar + 1..];
+            let len = after
+                .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .unwrap_or(after.len());
+            let name = &after[..len];
+            if name.is_empty() {
+                return Err(self.err(
+                    node,
+                    format!("{attr}=\"{raw}\": '$' is not followed by a parameter name"),
+                ));
+            }
+            let Some((value, _)) = self.defaults.get(name) else {
+                return Err(self.err(
+                    node,
+                    format!(
+                        "{attr}=\"{raw}\": undefined parameter ${name} \
+                         (declare it earlier with <default name=\"{name}\" value=\"...\"/>)"
+                    ),
+                ));
+            };
+            out.push_str(value);
+            rest = &after[len..];
+        }
+        out.push_str(rest);
+        Ok(out)
+    }
+
+    /// An attribute after `$` substitution.
+    fn attr(&self, node: Node, name: &str) -> Result<Option<String>> {
+        node.attribute(name)
+            .map(|raw| self.substitute(node, name, raw))
+            .transpose()
+    }
+
+    /// A required attribute after `$` substitution.
+    fn required_attr(&self, node: Node, name: &str) -> Result<String> {
+        self.attr(node, name)?
+            .ok_or_else(|| self.err(node, format!("missing attribute \"{name}\"")))
+    }
+
+    /// The `type` attribute of a plugin element, which must be one of `known`.
+    fn plugin_type(&self, node: Node, kind: &str, known: &[&str]) -> Result<String> {
+        let ty = self.required_attr(node, "type")?;
+        if known.contains(&ty.as_str()) {
+            Ok(ty)
+        } else {
+            Err(self.err(
+                node,
+                format!(
+                    "unsupported {kind} type \"{ty}\"; supported: {}",
+                    list(known)
+                ),
+            ))
+        }
+    }
+
+    /// Records the `id` attribute of a top-level object; ids must be unique.
+    fn register_id(&mut self, node: Node) -> Result<Option<String>> {
+        let Some(id) = self.attr(node, "id")? else {
+            return Ok(None);
+        };
+        if id.is_empty() {
+            return Err(self.err(node, "empty id"));
+        }
+        if let Some((element, line)) = self.ids.get(&id) {
+            return Err(self.err(
+                node,
+                format!("id \"{id}\" is already used by <{element}> at line {line}"),
+            ));
+        }
+        self.ids
+            .insert(id.clone(), (describe(node), self.line(node)));
+        Ok(Some(id))
+    }
+
+    /// A finite number; the message names the attribute and its text.
+    fn number(&self, node: Node, attr: &str, text: &str) -> Result<f32> {
+        match text.trim().parse::<f32>() {
+            Ok(value) if value.is_finite() => Ok(value),
+            _ => Err(self.err(node, format!("{attr}=\"{text}\" is not a finite number"))),
+        }
+    }
+
+    /// Numbers separated by commas and/or whitespace.
+    fn numbers(&self, node: Node, attr: &str, text: &str) -> Result<Vec<f32>> {
+        text.split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|token| !token.is_empty())
+            .map(|token| match token.parse::<f32>() {
+                Ok(value) if value.is_finite() => Ok(value),
+                _ => Err(self.err(
+                    node,
+                    format!("{attr}=\"{text}\": \"{token}\" is not a finite number"),
+                )),
+            })
+            .collect()
+    }
+
+    /// Exactly three numbers.
+    fn vec3(&self, node: Node, attr: &str, text: &str) -> Result<Vec3> {
+        match self.numbers(node, attr, text)?.as_slice() {
+            [x, y, z] => Ok(Vec3::new(*x, *y, *z)),
+            other => Err(self.err(
+                node,
+                format!(
+                    "{attr}=\"{text}\" must hold 3 numbers, found {}",
+                    other.len()
+                ),
+            )),
+        }
+    }
+
+    /// A vector given as `value="x, y, z"` or as `x`, `y`, `z` attributes (each defaulting to
+    /// `default`), not both.
+    fn xyz(&self, node: Node, default: f32) -> Result<Vec3> {
+        let components = [
+            self.attr(node, "x")?,
+            self.attr(node, "y")?,
+            self.attr(node, "z")?,
+        ];
+        if let Some(value) = self.attr(node, "value")? {
+            if components.iter().any(Option::is_some) {
+                return Err(self.err(
+                    node,
+                    format!("value=\"{value}\" given together with x/y/z; use one or the other"),
+                ));
+            }
+            return self.vec3(node, "value", &value);
+        }
+        let mut out = Vec3::splat(default);
+        for (i, (key, text)) in ["x", "y", "z"].iter().zip(&components).enumerate() {
+            if let Some(text) = text {
+                out[i] = self.number(node, key, text)?;
+            }
+        }
+        Ok(out)
+    }
+
+    /// A `<transform>`: its operations in document order, each left-multiplied (`T = op·T`).
+    fn transform(&self, node: Node<'a, 'i>) -> Result<Mat4> {
+        let mut total = Mat4::IDENTITY;
+        for op in self.elements(node)? {
+            self.leaf(op)?;
+            let matrix = match op.tag_name().name() {
+                "translate" => {
+                    self.check_attrs(op, &["x", "y", "z", "value"])?;
+                    Mat4::from_translation(self.xyz(op, 0.0)?)
+                }
+                "rotate" => {
+                    self.check_attrs(op, &["x", "y", "z", "value", "angle"])?;
+                    let axis = self.xyz(op, 0.0)?;
+                    let angle_text = self.required_attr(op, "angle")?;
+                    let angle = self.number(op, "angle", &angle_text)?;
+                    let Some(axis) = axis.try_normalize() else {
+                        return Err(self.err(op, format!("rotation axis {axis} is zero")));
+                    };
+                    Mat4::from_axis_angle(axis, angle.to_radians())
+                }
+                "scale" => {
+                    self.check_attrs(op, &["x", "y", "z", "value"])?;
+                    Mat4::from_scale(self.scale_factors(op)?)
+                }
+                "matrix" => {
+                    self.check_attrs(op, &["value"])?;
+                    let text = self.required_attr(op, "value")?;
+                    let values = self.numbers(op, "value", &text)?;
+                    let Ok(rows) = <[f32; 16]>::try_from(values.as_slice()) else {
+                        return Err(self.err(
+                            op,
+                            format!(
+                                "value=\"{text}\" must hold 16 numbers (row-major 4x4), found {}",
+                                values.len()
+                            ),
+                        ));
+                    };
+                    // glam reads column-major, so row-major input arrives transposed.
+                    Mat4::from_cols_array(&rows).transpose()
+                }
+                "lookat" => {
+                    self.check_attrs(op, &["origin", "target", "up"])?;
+                    self.look_at(op)?
+                }
+                other => {
+                    return Err(self.err(
+                        op,
+                        format!(
+                            "unsupported transform operation <{other}> in <{}> (line {}); \
+                             supported: translate, rotate, scale, matrix, lookat",
+                            describe(node),
+                            self.line(node)
+                        ),
+                    ));
+                }
+            };
+            total = matrix * total;
+        }
+        if !total.is_finite() {
+            return Err(self.err(node, format!("the transform is not finite: {total}")));
+        }
+        Ok(total)
+    }
+
+    /// The factors of a `<scale>`: `value="s"` (uniform), `value="x y z"`, or `x`/`y`/`z`
+    /// attributes each defaulting to 1.
+    fn scale_factors(&self, op: Node) -> Result<Vec3> {
+        let factors = match self.attr(op, "value")? {
+            None => self.xyz(op, 1.0)?,
+            Some(text) => {
+                if let Some(key) = ["x", "y", "z"].iter().find(|k| op.attribute(**k).is_some()) {
+                    return Err(self.err(
+                        op,
+                        format!(
+                            "value=\"{text}\" given together with {key}; use one \
+                             or the other"
+                        ),
+                    ));
+                }
+                match self.numbers(op, "value", &text)?.as_slice() {
+                    [s] => Vec3::splat(*s),
+                    [x, y, z] => Vec3::new(*x, *y, *z),
+                    other => {
+                        return Err(self.err(
+                            op,
+                            format!(
+                                "value=\"{text}\" must hold 1 (uniform) or 3 \
+                                 numbers, found {}",
+                                other.len()
+                            ),
+                        ));
+                    }
+                }
+            }
+        };
+        Ok(factors)
+    }
+
+    /// Mitsuba's look-at frame: columns `left = normalize(up × dir)`, `dir × left`, `dir`,
+    /// `origin`, so local `+z` looks at the target and local `+x` is image-left.
+    fn look_at(&self, op: Node) -> Result<Mat4> {
+        let mut points = [Vec3::ZERO; 3];
+        for (point, key) in points.iter_mut().zip(["origin", "target", "up"]) {
+            let text = self.required_attr(op, key)?;
+            *point = self.vec3(op, key, &text)?;
+        }
+        let [origin, target, up] = points;
+        let Some(dir) = (target - origin).try_normalize() else {
+            return Err(self.err(op, format!("origin {origin} and target {target} coincide")));
+        };
+        let left = up.cross(dir);
+        if !(left.length() > 1e-6 * up.length()) {
+            return Err(self.err(
+                op,
+                format!("up {up} is zero or parallel to the viewing direction {dir}"),
+            ));
+        }
+        let left = left.normalize();
+        let new_up = dir.cross(left);
+        Ok(Mat4::from_cols(
+            left.extend(0.0),
+            new_up.extend(0.0),
+            dir.extend(0.0),
+            origin.extend(1.0),
+        ))
+    }
+
+    /// An optional `to_world`, which must be an invertible affine map (identity if absent).
+    fn affine(&self, to_world: At<'a, 'i, Mat4>) -> Result<Mat4> {
+        let Some((matrix, node)) = to_world else {
+            return Ok(Mat4::IDENTITY);
+        };
+        if matrix.row(3) != Vec4::W {
+            return Err(self.err(
+                node,
+                format!(
+                    "a projective transform (bottom row {}) is not supported here",
+                    matrix.row(3)
+                ),
+            ));
+        }
+        let det = Mat3::from_mat4(matrix).determinant();
+        if !(det.abs() > 0.0) {
+            return Err(self.err(
+                node,
+                format!("the transform is singular (determinant {det}): {matrix}"),
+            ));
+        }
+        Ok(matrix)
+    }
+
+    /// The `<scene>` root.
+    fn scene(&mut self, root: Node<'a, 'i>) -> Result<SceneDesc> {
+        if root.tag_name().name() != "scene" || root.tag_name().namespace().is_some() {
+            return Err(self.err(root, "the root element must be <scene version=\"3.x.y\">"));
+        }
+        self.check_attrs(root, &["version"])?;
+        let Some(version) = root.attribute("version") else {
+            return Err(self.err(root, "missing attribute \"version\" (e.g. \"3.0.0\")"));
+        };
+        let parts: Vec<&str> = version.split('.').collect();
+        if parts.len() != 3 || parts.iter().any(|p| p.parse::<u32>().is_err()) || parts[0] != "3" {
+            return Err(self.err(
+                root,
+                format!("version=\"{version}\" is not a Mitsuba 3 version (3.x.y)"),
+            ));
+        }
+
+        let mut integrator: At<'a, 'i, IntegratorDesc> = None;
+        let mut sensor: At<'a, 'i, CameraDesc> = None;
+        let mut environment: At<'a, 'i, Rgb> = None;
+        let mut shapes = Vec::new();
+        let mut point_lights = Vec::new();
+        for child in self.elements(root)? {
+            match child.tag_name().name() {
+                "default" => self.default(child)?,
+                "integrator" => {
+                    if let Some((_, first)) = integrator {
+                        return Err(self.err(
+                            child,
+                            format!(
+                                "a second <integrator> (the first is at line {})",
+                                self.line(first)
+                            ),
+                        ));
+                    }
+                    integrator = Some((self.integrator(child)?, child));
+                }
+                "sensor" => {
+                    if let Some((_, first)) = sensor {
+                        return Err(self.err(
+                            child,
+                            format!(
+                                "a second <sensor>: exactly one is supported (the first is at \
+                                 line {})",
+                                self.line(first)
+                            ),
+                        ));
+                    }
+                    sensor = Some((self.sensor(child)?, child));
+                }
+                "shape" => shapes.push(self.shape(child)?),
+                "bsdf" => self.top_bsdf(child)?,
+                "emitter" => match self.emitter(child)? {
+                    TopEmitter::Point(light) => point_lights.push(light),
+                    TopEmitter::Constant(radiance) => {
+                        if let Some((_, first)) = environment {
+                            return Err(self.err(
+                                child,
+                                format!(
+                                    "a second constant emitter: at most one is supported (the \
+                                     first is at line {})",
+                                    self.line(first)
+                                ),
+                            ));
+                        }
+                        environment = Some((radiance, child));
+                    }
+                },
+                other => {
+                    return Err(self.err(
+                        child,
+                        format!(
+                            "unsupported element <{other}> in <scene>; supported: default, \
+                             integrator, sensor, shape, bsdf, emitter"
+                        ),
+                    ));
+                }
+            }
+        }
+        let Some((camera, _)) = sensor else {
+            return Err(self.err(root, "the scene has no <sensor type=\"perspective\">"));
+        };
+        Ok(SceneDesc {
+            integrator: value_or(integrator, IntegratorDesc::default()),
+            camera,
+            shapes,
+            point_lights,
+            environment: environment.map(|(radiance, _)| radiance),
+        })
+    }
+
+    /// `<default name value>`: declares `$name` for the attributes that follow.
+    fn default(&mut self, node: Node<'a, 'i>) -> Result<()> {
+        self.check_attrs(node, &["name", "value"])?;
+        self.leaf(node)?;
+        let Some(name) = node.attribute("name") else {
+            return Err(self.err(node, "missing attribute \"name\""));
+        };
+        if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return Err(self.err(
+                node,
+                format!("name=\"{name}\" is not a parameter name (letters, digits, '_')"),
+            ));
+        }
+        let value = self.required_attr(node, "value")?;
+        if let Some((_, line)) = self.defaults.get(name) {
+            return Err(self.err(
+                node,
+                format!("a second default for ${name} (the first is at line {line})"),
+            ));
+        }
+        let line = self.line(node);
+        self.defaults.insert(name.to_string(), (value, line));
+        Ok(())
+    }
+
+    /// `<integrator type="path">`.
+    fn integrator(&mut self, node: Node<'a, 'i>) -> Result<IntegratorDesc> {
+        self.check_attrs(node, &["type", "id"])?;
+        self.register_id(node)?;
+        self.plugin_type(node, "integrator", &["path"])?;
+        let mut props = Props::collect(self, node)?;
+        let max_depth = props.integer(self, "max_depth")?;
+        let rr_depth = props.integer(self, "rr_depth")?;
+        props.finish(self)?;
+
+        let max_depth = match max_depth {
+            None | Some((-1, _)) => None,
+            Some((0, at)) => {
+                return Err(self.err(
+                    at,
+                    "max_depth = 0 would render nothing, not even emitters; use -1 (unbounded) \
+                     or a depth >= 1",
+                ));
+            }
+            Some((depth, at)) => Some(u32::try_from(depth).map_err(|_| {
+                self.err(
+                    at,
+                    format!("max_depth = {depth}: must be -1 (unbounded) or in 1..=4294967295"),
+                )
+            })?),
+        };
+        let rr_depth = match rr_depth {
+            None => IntegratorDesc::default().rr_depth,
+            Some((depth, at)) => u32::try_from(depth)
+                .ok()
+                .filter(|d| *d >= 1)
+                .ok_or_else(|| self.err(at, format!("rr_depth = {depth}: must be >= 1")))?,
+        };
+        Ok(IntegratorDesc {
+            max_depth,
+            rr_depth,
+        })
+    }
+
+    /// `<sensor type="perspective">` with its film and sampler.
+    fn sensor(&mut self, node: Node<'a, 'i>) -> Result<CameraDesc> {
+        self.check_attrs(node, &["type", "id"])?;
+        self.register_id(node)?;
+        self.plugin_type(node, "sensor", &["perspective"])?;
+        let mut props = Props::collect(self, node)?;
+        let films = props.objects(&["film"]);
+        let samplers = props.objects(&["sampler"]);
+        let fov = props.float(self, "fov")?;
+        let fov_axis = props.string(self, "fov_axis")?;
+        let to_world = props.transform(self, "to_world")?;
+        let near_clip = props.float(self, "near_clip")?;
+        let far_clip = props.float(self, "far_clip")?;
+        props.reject(
+            self,
+            "focal_length",
+            "give the field of view as <float name=\"fov\"> instead",
+        )?;
+        props.finish(self)?;
+
+        let Some((fov_deg, fov_at)) = fov else {
+            return Err(self.err(node, "missing required parameter <float name=\"fov\">"));
+        };
+        if !(fov_deg > 0.0 && fov_deg < 180.0) {
+            return Err(self.err(
+                fov_at,
+                format!("fov = {fov_deg}: must be in (0, 180) degrees"),
+            ));
+        }
+        let fov_axis = match fov_axis {
+            None => FovAxis::X,
+            Some((axis, at)) => match axis.as_str() {
+                "x" => FovAxis::X,
+                "y" => FovAxis::Y,
+                "diagonal" => FovAxis::Diagonal,
+                "smaller" => FovAxis::Smaller,
+                "larger" => FovAxis::Larger,
+                _ => {
+                    return Err(self.err(
+                        at,
+                        format!("fov_axis = \"{axis}\": must be x, y, diagonal, smaller or larger"),
+                    ));
+                }
+            },
+        };
+        let to_world_at = to_world.map(|(_, at)| at);
+        let to_world = self.affine(to_world)?;
+        if let Some(at) = to_world_at {
+            let linear = Mat3::from_mat4(to_world);
+            let lengths = Vec3::new(
+                linear.x_axis.length(),
+                linear.y_axis.length(),
+                linear.z_axis.length(),
+            );
+            let dots = Vec3::new(
+                linear.x_axis.dot(linear.y_axis),
+                linear.y_axis.dot(linear.z_axis),
+                linear.z_axis.dot(linear.x_axis),
+            );
+            if (lengths - Vec3::ONE).abs().max_element() > SIMILARITY_TOLERANCE
+                || dots.abs().max_element() > SIMILARITY_TOLERANCE
+            {
+                return Err(self.err(
+                    at,
+                    format!(
+                        "the camera transform scales or shears (axis lengths {lengths}, \
+                         pairwise dot products {dots}); Mitsuba forbids scale factors in a \
+                         camera-to-world transform"
+                    ),
+                ));
+            }
+        }
+        let near = value_or(near_clip, 0.01);
+        let far = value_or(far_clip, 10000.0);
+        if !(near > 0.0) {
+            let at = near_clip.map_or(node, |(_, at)| at);
+            return Err(self.err(at, format!("near_clip = {near}: must be > 0")));
+        }
+        if !(far > near) {
+            let at = far_clip.or(near_clip).map_or(node, |(_, at)| at);
+            return Err(self.err(
+                at,
+                format!("far_clip = {far} must exceed near_clip = {near}"),
+            ));
+        }
+
+        let (width, height) = match films.as_slice() {
+            [] => {
+                return Err(self.err(
+                    node,
+                    "missing <film type=\"hdrfilm\">: Mitsuba's default film reconstructs with \
+                     a gaussian filter, which is not modelled; add an hdrfilm with \
+                     <rfilter type=\"box\"/>",
+                ));
+            }
+            [film] => self.film(*film)?,
+            [_, second, ..] => {
+                return Err(self.err(*second, "a sensor takes exactly one <film>"));
+            }
+        };
+        let spp = match samplers.as_slice() {
+            // Mitsuba's default sampler is `independent` with 4 samples per pixel.
+            [] => 4,
+            [sampler] => self.sampler(*sampler)?,
+            [_, second, ..] => {
+                return Err(self.err(*second, "a sensor takes at most one <sampler>"));
+            }
+        };
+        Ok(CameraDesc {
+            to_world,
+            fov_deg,
+            fov_axis,
+            width,
+            height,
+            spp,
+            near_clip: near,
+            far_clip: far,
+        })
+    }
+
+    /// `<film type="hdrfilm">` with an explicit box `rfilter`; returns (width, height).
+    fn film(&self, node: Node<'a, 'i>) -> Result<(u32, u32)> {
+        self.check_attrs(node, &["type", "name"])?;
+        self.plugin_type(node, "film", &["hdrfilm"])?;
+        let mut props = Props::collect(self, node)?;
+        let filters = props.objects(&["rfilter"]);
+        let width = props.integer(self, "width")?;
+        let height = props.integer(self, "height")?;
+        let pixel_format = props.string(self, "pixel_format")?;
+        let component_format = props.string(self, "component_format")?;
+        props.finish(self)?;
+
+        let mut size = [768, 576];
+        for (slot, given, name) in [(0, width, "width"), (1, height, "height")] {
+            if let Some((value, at)) = given {
+                size[slot] = u32::try_from(value)
+                    .ok()
+                    .filter(|v| *v >= 1)
+                    .ok_or_else(|| self.err(at, format!("{name} = {value}: must be >= 1")))?;
+            }
+        }
+        for (given, allowed) in [
+            (pixel_format, PIXEL_FORMATS),
+            (component_format, COMPONENT_FORMATS),
+        ] {
+            if let Some((value, at)) = given {
+                if !allowed.contains(&value.as_str()) {
+                    return Err(
+                        self.err(at, format!("\"{value}\" is not one of {}", list(allowed)))
+                    );
+                }
+            }
+        }
+        match filters.as_slice() {
+            [] => Err(self.err(
+                node,
+                "missing <rfilter type=\"box\"/>: Mitsuba's default reconstruction filter is \
+                 gaussian, which is not modelled; give the box filter explicitly",
+            )),
+            [filter] => {
+                self.check_attrs(*filter, &["type", "name"])?;
+                self.plugin_type(*filter, "rfilter", &["box"])?;
+                Props::collect(self, *filter)?.finish(self)?;
+                Ok((size[0], size[1]))
+            }
+            [_, second, ..] => Err(self.err(*second, "a film takes exactly one <rfilter>")),
+        }
+    }
+
+    /// `<sampler type="independent">`; returns its `sample_count`.
+    fn sampler(&self, node: Node<'a, 'i>) -> Result<u32> {
+        self.check_attrs(node, &["type", "name"])?;
+        self.plugin_type(node, "sampler", &["independent"])?;
+        let mut props = Props::collect(self, node)?;
+        let count = props.integer(self, "sample_count")?;
+        // The seed only selects Mitsuba's random sequence; accepted and not used.
+        props.integer(self, "seed")?;
+        props.finish(self)?;
+        match count {
+            None => Ok(4),
+            Some((value, at)) => u32::try_from(value)
+                .ok()
+                .filter(|v| *v >= 1)
+                .ok_or_else(|| self.err(at, format!("sample_count = {value}: must be >= 1"))),
+        }
+    }
+
+    /// A top-level `<bsdf>`, which must carry an id.
+    fn top_bsdf(&mut self, node: Node<'a, 'i>) -> Result<()> {
+        self.check_attrs(node, &["type", "id"])?;
+        if node.attribute("id").is_none() {
+            return Err(self.err(
+                node,
+                "a top-level <bsdf> needs an id so that shapes can <ref> it",
+            ));
+        }
+        let bsdf = self.bsdf(node)?;
+        let id = self.register_id(node)?.expect("checked above");
+        self.bsdfs.insert(id, bsdf);
+        Ok(())
+    }
+
+    /// A BSDF nested in a shape or `twosided`: a `<bsdf>` or a `<ref>` to a top-level one.
+    fn nested_bsdf(&self, node: Node<'a, 'i>) -> Result<BsdfDesc> {
+        if node.tag_name().name() != "ref" {
+            self.check_attrs(node, &["type", "name"])?;
+            return self.bsdf(node);
+        }
+        self.check_attrs(node, &["id", "name"])?;
+        self.leaf(node)?;
+        let id = self.required_attr(node, "id")?;
+        if let Some(bsdf) = self.bsdfs.get(&id) {
+            return Ok(bsdf.clone());
+        }
+        if let Some((element, line)) = self.ids.get(&id) {
+            return Err(self.err(
+                node,
+                format!("id \"{id}\" refers to <{element}> at line {line}, not to a bsdf"),
+            ));
+        }
+        let mut known: Vec<&str> = self.bsdfs.keys().map(String::as_str).collect();
+        known.sort_unstable();
+        let known = if known.is_empty() {
+            "none".to_string()
+        } else {
+            list(&known)
+        };
+        Err(self.err(
+            node,
+            format!("unknown id \"{id}\"; bsdfs declared so far: {known}"),
+        ))
+    }
+
+    /// The body of a `<bsdf>` element (attributes already checked by the caller).
+    fn bsdf(&self, node: Node<'a, 'i>) -> Result<BsdfDesc> {
+        let ty = self.plugin_type(
+            node,
+            "bsdf",
+            &[
+                "diffuse",
+                "conductor",
+                "roughconductor",
+                "dielectric",
+                "twosided",
+            ],
+        )?;
+        let mut props = Props::collect(self, node)?;
+        let one = Rgb::ONE;
+        let bsdf = match ty.as_str() {
+            "diffuse" => {
+                let reflectance = props.spectrum(self, "reflectance")?;
+                props.finish(self)?;
+                BsdfDesc::Diffuse {
+                    reflectance: value_or(reflectance, Rgb::splat(0.5)),
+                }
+            }
+            "conductor" => {
+                self.reject_complex_ior(&mut props)?;
+                let material = props.string(self, "material")?;
+                let tint = props.spectrum(self, "specular_reflectance")?;
+                props.finish(self)?;
+                self.check_material(material)?;
+                BsdfDesc::Conductor {
+                    specular_reflectance: value_or(tint, one),
+                }
+            }
+            "roughconductor" => {
+                self.reject_complex_ior(&mut props)?;
+                for name in ["alpha_u", "alpha_v"] {
+                    props.reject(
+                        self,
+                        name,
+                        "anisotropic roughness is not modelled; use <float name=\"alpha\">",
+                    )?;
+                }
+                let distribution = props.string(self, "distribution")?;
+                let alpha = props.float(self, "alpha")?;
+                let material = props.string(self, "material")?;
+                let sample_visible = props.boolean(self, "sample_visible")?;
+                let tint = props.spectrum(self, "specular_reflectance")?;
+                props.finish(self)?;
+                match distribution {
+                    None => {
+                        return Err(self.err(
+                            node,
+                            "missing <string name=\"distribution\" value=\"ggx\"/>: Mitsuba's \
+                             default distribution is beckmann, which is not modelled; give ggx \
+                             explicitly",
+                        ));
+                    }
+                    Some((d, at)) if d != "ggx" => {
+                        return Err(self.err(
+                            at,
+                            format!("distribution \"{d}\" is not modelled; only \"ggx\" is"),
+                        ));
+                    }
+                    Some(_) => {}
+                }
+                if let Some((false, at)) = sample_visible {
+                    return Err(self.err(
+                        at,
+                        "sample_visible = false is not modelled; only true (Mitsuba's default)",
+                    ));
+                }
+                self.check_material(material)?;
+                let alpha_value = value_or(alpha, 0.1);
+                if !(alpha_value > 0.0) {
+                    let at = alpha.map_or(node, |(_, at)| at);
+                    return Err(self.err(
+                        at,
+                        format!(
+                            "alpha = {alpha_value}: must be > 0 (use a conductor for a perfect \
+                             mirror)"
+                        ),
+                    ));
+                }
+                BsdfDesc::RoughConductor {
+                    alpha: alpha_value,
+                    specular_reflectance: value_or(tint, one),
+                }
+            }
+            "dielectric" => {
+                let int_ior = props.ior(self, "int_ior")?;
+                let ext_ior = props.ior(self, "ext_ior")?;
+                let reflect = props.spectrum(self, "specular_reflectance")?;
+                let transmit = props.spectrum(self, "specular_transmittance")?;
+                props.finish(self)?;
+                BsdfDesc::Dielectric {
+                    int_ior: value_or(int_ior, 1.5046),
+                    ext_ior: value_or(ext_ior, 1.000277),
+                    specular_reflectance: value_or(reflect, one),
+                    specular_transmittance: value_or(transmit, one),
+                }
+            }
+            "twosided" => {
+                let inner = props.objects(&["bsdf", "ref"]);
+                props.finish(self)?;
+                let inner = match inner.as_slice() {
+                    [] => return Err(self.err(node, "twosided needs one nested <bsdf>")),
+                    [inner] => *inner,
+                    [_, second, ..] => {
+                        return Err(self.err(
+                            *second,
+                            "a second bsdf in twosided: different front and back BSDFs are not \
+                             supported",
+                        ));
+                    }
+                };
+                let nested = self.nested_bsdf(inner)?;
+                match nested {
+                    BsdfDesc::TwoSided(_) | BsdfDesc::Dielectric { .. } => {
+                        return Err(
+                            self.err(inner, "twosided cannot wrap a twosided or dielectric bsdf")
+                        );
+                    }
+                    _ => BsdfDesc::TwoSided(Box::new(nested)),
+                }
+            }
+            _ => unreachable!("plugin_type accepted {ty}"),
+        };
+        Ok(bsdf)
+    }
+
+    /// Conductors model only Mitsuba's `material="none"`: complex indices are rejected.
+    fn reject_complex_ior(&self, props: &mut Props<'a, 'i>) -> Result<()> {
+        for name in ["eta", "k"] {
+            props.reject(
+                self,
+                name,
+                "complex indices of refraction are not modelled; only material=\"none\" (a \
+                 mirror tinted by specular_reflectance)",
+            )?;
+        }
+        Ok(())
+    }
+
+    /// A conductor's `material`, which may only be `none` (also Mitsuba 3's default).
+    fn check_material(&self, material: At<'a, 'i, String>) -> Result<()> {
+        match material {
+            Some((name, at)) if name != "none" => Err(self.err(
+                at,
+                format!(
+                    "material \"{name}\" is not modelled; only \"none\" (a mirror tinted by \
+                     specular_reflectance)"
+                ),
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    /// A top-level `<emitter>`: `point` or `constant`.
+    fn emitter(&mut self, node: Node<'a, 'i>) -> Result<TopEmitter> {
+        self.check_attrs(node, &["type", "id"])?;
+        if node.attribute("type") == Some("area") {
+            return Err(self.err(node, "an area emitter must be nested inside a <shape>"));
+        }
+        let ty = self.plugin_type(node, "emitter", &["point", "constant"])?;
+        self.register_id(node)?;
+        let mut props = Props::collect(self, node)?;
+        if ty == "constant" {
+            let radiance = props.spectrum(self, "radiance")?;
+            props.finish(self)?;
+            let (radiance, _) = radiance.ok_or_else(|| {
+                self.err(node, "missing required parameter <rgb name=\"radiance\">")
+            })?;
+            return Ok(TopEmitter::Constant(radiance));
+        }
+        let intensity = props.spectrum(self, "intensity")?;
+        let position = props.point(self, "position")?;
+        let to_world = props.transform(self, "to_world")?;
+        props.finish(self)?;
+        let (intensity, _) = intensity
+            .ok_or_else(|| self.err(node, "missing required parameter <rgb name=\"intensity\">"))?;
+        let position = match (position, to_world) {
+            (Some(_), Some((_, at))) => {
+                return Err(self.err(
+                    at,
+                    "give either position or to_world for a point emitter, not both",
+                ));
+            }
+            (Some((p, _)), None) => p,
+            (None, to_world) => self.affine(to_world)?.w_axis.truncate(),
+        };
+        Ok(TopEmitter::Point(PointLightDesc {
+            position,
+            intensity,
+        }))
+    }
+
+    /// A `<shape>` with its BSDF and optional area emitter.
+    fn shape(&mut self, node: Node<'a, 'i>) -> Result<ShapeDesc> {
+        self.check_attrs(node, &["type", "id"])?;
+        let ty = self.plugin_type(
+            node,
+            "shape",
+            &["rectangle", "cube", "sphere", "disk", "obj"],
+        )?;
+        self.register_id(node)?;
+        let mut props = Props::collect(self, node)?;
+        let bsdfs = props.objects(&["bsdf", "ref"]);
+        let emitters = props.objects(&["emitter"]);
+        props.reject(
+            self,
+            "flip_normals",
+            "Mitsuba's flip_normals is not modelled; orient the shape with to_world",
+        )?;
+        let geometry = match ty.as_str() {
+            "rectangle" | "cube" => {
+                let to_world = props.transform(self, "to_world")?;
+                props.finish(self)?;
+                let to_world = self.affine(to_world)?;
+                let (positions, indices) = if ty == "rectangle" {
+                    rectangle_mesh()
+                } else {
+                    cube_mesh()
+                };
+                GeometryDesc::Mesh(transform_mesh(positions, None, indices, to_world))
+            }
+            "sphere" => {
+                let center = props.point(self, "center")?;
+                let radius = props.float(self, "radius")?;
+                let to_world = props.transform(self, "to_world")?;
+                props.finish(self)?;
+                self.sphere(node, center, radius, to_world)?
+            }
+            "disk" => {
+                let to_world = props.transform(self, "to_world")?;
+                props.finish(self)?;
+                GeometryDesc::Disk {
+                    to_world: self.affine(to_world)?,
+                }
+            }
+            "obj" => {
+                let filename = props.string(self, "filename")?;
+                let face_normals = props.boolean(self, "face_normals")?;
+                let to_world = props.transform(self, "to_world")?;
+                props.finish(self)?;
+                let Some((filename, at)) = filename else {
+                    return Err(self.err(
+                        node,
+                        "missing required parameter <string name=\"filename\">",
+                    ));
+                };
+                let to_world = self.affine(to_world)?;
+                GeometryDesc::Mesh(self.obj(
+                    at,
+                    &filename,
+                    value_or(face_normals, false),
+                    to_world,
+                )?)
+            }
+            _ => unreachable!("plugin_type accepted {ty}"),
+        };
+
+        let bsdf = match bsdfs.as_slice() {
+            [] => BsdfDesc::default(),
+            [bsdf] => self.nested_bsdf(*bsdf)?,
+            [first, second, ..] => {
+                return Err(self.err(
+                    *second,
+                    format!(
+                        "a shape takes at most one bsdf (the first is at line {})",
+                        self.line(*first)
+                    ),
+                ));
+            }
+        };
+        let emission = match emitters.as_slice() {
+            [] => None,
+            [emitter] => Some(self.area_emitter(*emitter)?),
+            [first, second, ..] => {
+                return Err(self.err(
+                    *second,
+                    format!(
+                        "a shape takes at most one emitter (the first is at line {})",
+                        self.line(*first)
+                    ),
+                ));
+            }
+        };
+        Ok(ShapeDesc {
+            geometry,
+            bsdf,
+            emission,
+        })
+    }
+
+    /// `sphere`: Mitsuba maps the unit sphere by `to_world · translate(center) · scale(radius)`,
+    /// which must be a similarity (uniform scale, rotation, translation) without mirroring.
+    fn sphere(
+        &self,
+        node: Node<'a, 'i>,
+        center: At<'a, 'i, Vec3>,
+        radius: At<'a, 'i, f32>,
+        to_world: At<'a, 'i, Mat4>,
+    ) -> Result<GeometryDesc> {
+        let r = value_or(radius, 1.0);
+        if !(r > 0.0) {
+            let at = radius.map_or(node, |(_, at)| at);
+            return Err(self.err(
+                at,
+                format!(
+                    "radius = {r}: must be > 0 (negative radii flip normals in Mitsuba, which \
+                     is not modelled)"
+                ),
+            ));
+        }
+        let at = to_world.map_or(node, |(_, at)| at);
+        let to_world = self.affine(to_world)?;
+        let full = to_world
+            * Mat4::from_translation(value_or(center, Vec3::ZERO))
+            * Mat4::from_scale(Vec3::splat(r));
+        let linear = Mat3::from_mat4(full);
+        let axes = [linear.x_axis, linear.y_axis, linear.z_axis];
+        let lengths = Vec3::from_array(axes.map(Vec3::length));
+        let world_radius = lengths.element_sum() / 3.0;
+        let spread = lengths.max_element() - lengths.min_element();
+        let skew = [
+            axes[0].dot(axes[1]),
+            axes[1].dot(axes[2]),
+            axes[2].dot(axes[0]),
+        ]
+        .map(f32::abs)
+        .into_iter()
+        .fold(0.0, f32::max);
+        if spread > SIMILARITY_TOLERANCE * world_radius
+            || skew > SIMILARITY_TOLERANCE * world_radius * world_radius
+        {
+            return Err(self.err(
+                at,
+                format!(
+                    "a sphere's to_world must be a uniform scale, rotation and translation; \
+                     this one scales the axes by {lengths} (non-uniform scale or shear)"
+                ),
+            ));
+        }
+        if linear.determinant() < 0.0 {
+            return Err(self.err(
+                at,
+                "a sphere's to_world mirrors (negative determinant), which flips its normals \
+                 in Mitsuba; not modelled",
+            ));
+        }
+        Ok(GeometryDesc::Sphere {
+            center: full.w_axis.truncate(),
+            radius: world_radius,
+        })
+    }
+
+    /// An `<emitter type="area">` nested in a shape; returns its radiance.
+    fn area_emitter(&self, node: Node<'a, 'i>) -> Result<Rgb> {
+        self.check_attrs(node, &["type", "name"])?;
+        let ty = self.required_attr(node, "type")?;
+        if ty != "area" {
+            return Err(self.err(
+                node,
+                format!("only area emitters may be nested in a shape, not \"{ty}\""),
+            ));
+        }
+        let mut props = Props::collect(self, node)?;
+        let radiance = props.spectrum(self, "radiance")?;
+        props.finish(self)?;
+        radiance
+            .map(|(radiance, _)| radiance)
+            .ok_or_else(|| self.err(node, "missing required parameter <rgb name=\"radiance\">"))
+    }
+
+    /// Loads an OBJ file (relative to the scene's folder) as one world-space mesh.
+    ///
+    /// Polygons are fan-triangulated; vertices are split per (position, texcoord, normal)
+    /// index triple, as Mitsuba does. Vertex normals from the file are kept unless
+    /// `face_normals`; without them Mitsuba computes angle-weighted vertex normals, and so does
+    /// this loader. `at` is the `filename` element, named in errors.
+    fn obj(
+        &self,
+        at: Node<'a, 'i>,
+        filename: &str,
+        face_normals: bool,
+        to_world: Mat4,
+    ) -> Result<MeshDesc> {
+        let path = self.base_dir.join(filename);
+        let bytes = std::fs::read(&path).map_err(|err| {
+            self.err(
+                at,
+                format!("cannot read OBJ file {}: {err}", path.display()),
+            )
+        })?;
+        // The update keeps the defaults of options behind tobj features we do not enable.
+        #[allow(clippy::needless_update)]
+        let options = tobj::LoadOptions {
+            triangulate: true,
+            single_index: true,
+            ignore_points: true,
+            ignore_lines: true,
+            ..Default::default()
+        };
+        // Materials (mtllib) are ignored: the shape's BSDF comes from the scene file.
+        let (models, _) =
+            tobj::load_obj_buf(&mut bytes.as_slice(), &options, |_| Ok(Default::default()))
+                .map_err(|err| {
+                    self.err(
+                        at,
+                        format!("cannot parse OBJ file {}: {err}", path.display()),
+                    )
+                })?;
+
+        let mut positions = Vec::new();
+        let mut normals = Vec::new();
+        let mut indices = Vec::new();
+        let mut with_normals = None;
+        for model in &models {
+            let mesh = &model.mesh;
+            let base = u32::try_from(positions.len()).map_err(|_| {
+                self.err(
+                    at,
+                    format!("OBJ file {} has too many vertices", path.display()),
+                )
+            })?;
+            let count = mesh.positions.len() / 3;
+            let has_normals = !mesh.normals.is_empty();
+            if has_normals && mesh.normals.len() != mesh.positions.len() {
+                return Err(self.err(
+                    at,
+                    format!(
+                        "OBJ file {}: object \"{}\" gives normals for only some vertices",
+                        path.display(),
+                        model.name
+                    ),
+                ));
+            }
+            if count > 0 && *with_normals.get_or_insert(has_normals) != has_normals {
+                return Err(self.err(
+                    at,
+                    format!(
+                        "OBJ file {}: some objects have vertex normals and others do not",
+                        path.display()
+                    ),
+                ));
+            }
+            positions.extend(mesh.positions.chunks_exact(3).map(Vec3::from_slice));
+            normals.extend(mesh.normals.chunks_exact(3).map(Vec3::from_slice));
+            for tri in mesh.indices.chunks_exact(3) {
+                if tri.iter().any(|&i| i as usize >= count) {
+                    return Err(self.err(
+                        at,
+                        format!("OBJ file {}: vertex index out of range", path.display()),
+                    ));
+                }
+                indices.push([tri[0] + base, tri[1] + base, tri[2] + base]);
+            }
+        }
+        if indices.is_empty() {
+            return Err(self.err(
+                at,
+                format!("OBJ file {} contains no triangles", path.display()),
+            ));
+        }
+        if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(self.err(
+                at,
+                format!("OBJ file {}: vertex {i} is not finite", path.display()),
+            ));
+        }
+        if let Some(i) = normals
+            .iter()
+            .position(|n| !(n.is_finite() && n.length_squared() > 0.0))
+        {
+            return Err(self.err(
+                at,
+                format!(
+                    "OBJ file {}: vertex normal {} is zero or not finite",
+                    path.display(),
+                    normals[i]
+                ),
+            ));
+        }
+        let file_normals = (!face_normals && !normals.is_empty()).then_some(normals);
+        let mut mesh = transform_mesh(positions, file_normals, indices, to_world);
+        if !face_normals && mesh.normals.is_none() {
+            mesh.normals = Some(angle_weighted_normals(&mesh.positions, &mesh.indices));
+        }
+        Ok(mesh)
+    }
+}
+
+/// Mitsuba's rectangle: the square `[-1,1]²` at `z = 0`, counter-clockwise seen from `+z`.
+fn rectangle_mesh() -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let positions = vec![
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(1.0, -1.0, 0.0),
+        Vec3::new(1.0, 1.0, 0.0),
+        Vec3::new(-1.0, 1.0, 0.0),
+    ];
+    (positions, vec![[0, 1, 2], [0, 2, 3]])
+}
+
+/// Mitsuba's cube: `[-1,1]³` as 6 faces of 2 triangles, each counter-clockwise seen from
+/// outside (4 vertices per face, as in Mitsuba's mesh).
+fn cube_mesh() -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let mut positions = Vec::with_capacity(24);
+    let mut indices = Vec::with_capacity(12);
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let normal = Vec3::AXES[axis] * sign;
+            // (u, v, normal) is right-handed, so corners in (u, v) order wind around `normal`.
+            let (mut u, mut v) = (Vec3::AXES[(axis + 1) % 3], Vec3::AXES[(axis + 2) % 3]);
+            if sign < 0.0 {
+                std::mem::swap(&mut u, &mut v);
+            }
+            let first = positions.len() as u32;
+            positions.extend([
+                normal - u - v,
+                normal + u - v,
+                normal + u + v,
+                normal - u + v,
+            ]);
+            indices.push([first, first + 1, first + 2]);
+            indices.push([first, first + 2, first + 3]);
+        }
+    }
+    (positions, indices)
+}
+
+/// Maps an object-space mesh to world space. Normals transform with the inverse transpose;
+/// since `(M a) × (M b) = det(M) · M⁻ᵀ (a × b)`, a mirroring map (`det < 0`) would turn each
+/// triangle's winding against its transformed normal, so the winding is reversed then to keep
+/// triangles counter-clockwise seen from the front.
+fn transform_mesh(
+    positions: Vec<Vec3>,
+    normals: Option<Vec<Vec3>>,
+    indices: Vec<[u32; 3]>,
+    to_world: Mat4,
+) -> MeshDesc {
+    let linear = Mat3::from_mat4(to_world);
+    let normal_matrix = linear.inverse().transpose();
+    let mirrored = linear.determinant() < 0.0;
+    MeshDesc {
+        positions: positions
+            .into_iter()
+            .map(|p| to_world.transform_point3(p))
+            .collect(),
+        normals: normals.map(|ns| {
+            ns.into_iter()
+                .map(|n| (normal_matrix * n).normalize())
+                .collect()
+        }),
+        indices: indices
+            .into_iter()
+            .map(|[a, b, c]| if mirrored { [a, c, b] } else { [a, b, c] })
+            .collect(),
+    }
+}
+
+/// Mitsuba's vertex normals for meshes without them: each triangle adds its unit normal weighted
+/// by its angle at the vertex (Thürmer and Wüthrich 1998). Vertices touched only by degenerate
+/// triangles get `+z` (those triangles have no area and are never hit).
+fn angle_weighted_normals(positions: &[Vec3], indices: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut sums = vec![Vec3::ZERO; positions.len()];
+    for tri in indices {
+        let p = tri.map(|i| positions[i as usize]);
+        let Some(normal) = (p[1] - p[0]).cross(p[2] - p[0]).try_normalize() else {
+            continue;
+        };
+        for k in 0..3 {
+            let angle = (p[(k + 1) % 3] - p[k]).angle_between(p[(k + 2) % 3] - p[k]);
+            sums[tri[k] as usize] += normal * angle;
+        }
+    }
+    sums.into_iter()
+        .map(|n| n.try_normalize().unwrap_or(Vec3::Z))
+        .collect()
+}

@@ -1,0 +1,723 @@
+//! Rays, the primitives the BVH holds, their intersection tests, and whole-shape sampling for
+//! next-event estimation.
+//!
+//! Orientation follows [`super::scene`]: a triangle's front is where
+//! `(p1 − p0) × (p2 − p0)` points, a sphere's front is its outside and a disk's front is the image
+//! of `+z`. [`Hit::ng`] is always the front normal, whichever side the ray came from; the
+//! integrator decides which side it is on.
+//!
+//! Triangles use the watertight test of Woop, Benthin and Wald (JCGT 2013): the per-ray shear
+//! is computed once ([`RayPre`]), edge functions that come out exactly zero are recomputed in
+//! double precision, so a ray through a shared edge or vertex never slips between triangles.
+
+use super::sampling::{self, Frame};
+use super::scene::{GeometryDesc, MeshDesc};
+use glam::{Mat4, Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// A ray `o + t·d`; `d` has unit length.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    /// Origin.
+    pub o: Vec3,
+    /// Unit direction.
+    pub d: Vec3,
+}
+
+impl Ray {
+    /// A ray from `o` along the unit vector `d`.
+    #[inline]
+    pub fn new(o: Vec3, d: Vec3) -> Ray {
+        Ray { o, d }
+    }
+
+    /// The point at parameter `t`.
+    #[inline]
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.o + self.d * t
+    }
+}
+
+/// A ray–surface intersection.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    /// Ray parameter (distance, `d` being unit).
+    pub t: f32,
+    /// The point on the surface.
+    pub p: Vec3,
+    /// Unit geometric normal of the shape's front (not flipped toward the ray).
+    pub ng: Vec3,
+    /// Unit shading normal: interpolated vertex normals where the mesh has them (flipped into
+    /// `ng`'s hemisphere when needed), else `ng`.
+    pub ns: Vec3,
+    /// Index of the shape in the scene.
+    pub shape: u32,
+}
+
+/// Per-ray data shared by every primitive test of one traversal: the origin, the direction
+/// and the watertight triangle test's axis permutation and shear.
+#[derive(Debug, Clone, Copy)]
+pub struct RayPre {
+    o: Vec3,
+    d: Vec3,
+    kx: usize,
+    ky: usize,
+    kz: usize,
+    sx: f32,
+    sy: f32,
+    sz: f32,
+}
+
+impl RayPre {
+    /// Precomputes the shear of `ray` (its direction must not be zero).
+    #[inline]
+    pub fn new(ray: &Ray) -> RayPre {
+        let a = ray.d.abs();
+        let kz = if a.x > a.y {
+            if a.x > a.z { 0 } else { 2 }
+        } else if a.y > a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        let d = ray.d.to_array();
+        // Keep the winding: swapping x and y when the dominant component is negative.
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        RayPre {
+            o: ray.o,
+            d: ray.d,
+            kx,
+            ky,
+            kz,
+            sx: d[kx] / d[kz],
+            sy: d[ky] / d[kz],
+            sz: 1.0 / d[kz],
+        }
+    }
+}
+
+/// What a primitive test reports before the closest hit is known: the parameter and the data
+/// [`Primitive::finish`] needs (unnormalised barycentrics for triangles, object-space `x, y`
+/// for disks).
+#[derive(Debug, Clone, Copy)]
+pub struct RawHit {
+    /// Ray parameter.
+    pub t: f32,
+    a: f32,
+    b: f32,
+    c: f32,
+}
+
+/// A disk's transforms, kept out of line so that [`Primitive`] stays small.
+#[derive(Debug, Clone)]
+pub struct DiskData {
+    to_world: Mat4,
+    to_object: Mat4,
+    normal: Vec3,
+}
+
+/// One intersectable primitive; each carries the index of the shape it belongs to.
+#[derive(Debug, Clone)]
+pub enum Primitive {
+    /// A world-space triangle, front counter-clockwise.
+    Triangle {
+        /// Vertices.
+        p: [Vec3; 3],
+        /// Vertex shading normals, if the mesh has them.
+        n: Option<Box<[Vec3; 3]>>,
+        /// Shape index.
+        shape: u32,
+    },
+    /// A sphere, front outside.
+    Sphere {
+        /// Centre.
+        center: Vec3,
+        /// Radius.
+        radius: f32,
+        /// Shape index.
+        shape: u32,
+    },
+    /// The unit disk at `z = 0` facing `+z`, mapped by an affine transform.
+    Disk {
+        /// Transforms and world normal.
+        disk: Box<DiskData>,
+        /// Shape index.
+        shape: u32,
+    },
+}
+
+/// The primitives of one shape. Degenerate parts (zero-area or non-finite triangles, spheres
+/// without a positive radius, disks with a singular transform) are left out.
+pub fn primitives(shape: u32, g: &GeometryDesc) -> Vec<Primitive> {
+    match g {
+        GeometryDesc::Mesh(m) => mesh_triangles(m)
+            .map(|(idx, p)| {
+                let n = m.normals.as_ref().and_then(|ns| {
+                    let get = |i: u32| ns.get(i as usize).copied();
+                    Some(Box::new([get(idx[0])?, get(idx[1])?, get(idx[2])?]))
+                });
+                Primitive::Triangle { p, n, shape }
+            })
+            .collect(),
+        &GeometryDesc::Sphere { center, radius } => {
+            if radius > 0.0 && radius.is_finite() && center.is_finite() {
+                vec![Primitive::Sphere {
+                    center,
+                    radius,
+                    shape,
+                }]
+            } else {
+                Vec::new()
+            }
+        }
+        GeometryDesc::Disk { to_world } => match disk_data(to_world) {
+            Some(d) => vec![Primitive::Disk {
+                disk: Box::new(d),
+                shape,
+            }],
+            None => Vec::new(),
+        },
+    }
+}
+
+/// The mesh's valid triangles: indices in range, finite, of non-zero area.
+fn mesh_triangles(m: &MeshDesc) -> impl Iterator<Item = ([u32; 3], [Vec3; 3])> + '_ {
+    m.indices.iter().filter_map(|&idx| {
+        let get = |i: u32| m.positions.get(i as usize).copied();
+        let p = [get(idx[0])?, get(idx[1])?, get(idx[2])?];
+        let c = (p[1] - p[0]).cross(p[2] - p[0]);
+        let len2 = c.length_squared();
+        (len2 > 0.0 && len2.is_finite() && p.iter().all(|v| v.is_finite())).then_some((idx, p))
+    })
+}
+
+/// The disk's inverse and front normal, or `None` for a singular or non-finite transform.
+fn disk_data(to_world: &Mat4) -> Option<DiskData> {
+    if !to_world.is_finite() {
+        return None;
+    }
+    // The unit disk only spans x and y: it is degenerate when their images are parallel.
+    let a = to_world.x_axis.truncate();
+    let b = to_world.y_axis.truncate();
+    let cross = a.cross(b).length_squared();
+    let det = to_world.determinant();
+    if !(cross > 0.0) || det == 0.0 {
+        return None;
+    }
+    let to_object = to_world.inverse();
+    if !to_object.is_finite() {
+        return None;
+    }
+    // Normal: inverse transpose applied to +z, i.e. the third row of the inverse.
+    let normal =
+        Vec3::new(to_object.x_axis.z, to_object.y_axis.z, to_object.z_axis.z).try_normalize()?;
+    Some(DiskData {
+        to_world: *to_world,
+        to_object,
+        normal,
+    })
+}
+
+impl Primitive {
+    /// The shape this primitive belongs to.
+    #[inline]
+    pub fn shape(&self) -> u32 {
+        match *self {
+            Primitive::Triangle { shape, .. }
+            | Primitive::Sphere { shape, .. }
+            | Primitive::Disk { shape, .. } => shape,
+        }
+    }
+
+    /// Axis-aligned bounds `(min, max)`. Curved and transformed shapes get a small relative
+    /// margin so that rounding in their tests never reaches outside the box.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        match self {
+            Primitive::Triangle { p, .. } => (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2])),
+            &Primitive::Sphere { center, radius, .. } => {
+                let e = Vec3::splat(radius) + pad(center, radius);
+                (center - e, center + e)
+            }
+            Primitive::Disk { disk, .. } => {
+                let m = &disk.to_world;
+                let c = m.w_axis.truncate();
+                let (a, b) = (m.x_axis.truncate(), m.y_axis.truncate());
+                // Extent of c + x·a + y·b over the unit disk, per axis: sqrt(a_i² + b_i²).
+                let half = (a * a + b * b).sqrt();
+                let e = half + pad(c, half.max_element());
+                (c - e, c + e)
+            }
+        }
+    }
+
+    /// Closest intersection with `t` in `(tmin, tmax)`, with the full hit record.
+    pub fn intersect(&self, ray: &Ray, tmin: f32, tmax: f32) -> Option<Hit> {
+        let pre = RayPre::new(ray);
+        self.intersect_raw(&pre, tmin, tmax)
+            .map(|h| self.finish(ray, &h))
+    }
+
+    /// The intersection test proper: `t` in `(tmin, tmax)` and what [`Primitive::finish`] needs.
+    #[inline]
+    pub fn intersect_raw(&self, r: &RayPre, tmin: f32, tmax: f32) -> Option<RawHit> {
+        match self {
+            Primitive::Triangle { p, .. } => intersect_triangle(p, r, tmin, tmax),
+            &Primitive::Sphere { center, radius, .. } => {
+                intersect_sphere(center, radius, r.o, r.d, tmin, tmax)
+            }
+            Primitive::Disk { disk, .. } => intersect_disk(disk, r.o, r.d, tmin, tmax),
+        }
+    }
+
+    /// The hit record of an intersection this primitive reported for `ray`.
+    pub fn finish(&self, ray: &Ray, h: &RawHit) -> Hit {
+        match self {
+            Primitive::Triangle { p, n, shape } => {
+                let det = h.a + h.b + h.c;
+                let inv = 1.0 / det;
+                let (b0, b1, b2) = (h.a * inv, h.b * inv, h.c * inv);
+                let pos = p[0] * b0 + p[1] * b1 + p[2] * b2;
+                let ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
+                let ns = match n {
+                    Some(n) => match (n[0] * b0 + n[1] * b1 + n[2] * b2).try_normalize() {
+                        Some(s) if s.dot(ng) < 0.0 => -s,
+                        Some(s) => s,
+                        None => ng,
+                    },
+                    None => ng,
+                };
+                Hit {
+                    t: h.t,
+                    p: pos,
+                    ng,
+                    ns,
+                    shape: *shape,
+                }
+            }
+            &Primitive::Sphere {
+                center,
+                radius,
+                shape,
+            } => {
+                // Refine from a point near the surface, where the quadratic is well conditioned
+                // (far away, |o − c|² ≫ r² costs a few ulps of t).
+                let near = ray.at(h.t) - center;
+                let (t, q) = match nearest_root(near, ray.d, radius) {
+                    Some(dt) => (h.t + dt, near + ray.d * dt),
+                    None => (h.t, near),
+                };
+                // Project onto the surface: the normal is exact and the point on the sphere.
+                let ng = q.try_normalize().unwrap_or(Vec3::Z);
+                Hit {
+                    t,
+                    p: center + ng * radius,
+                    ng,
+                    ns: ng,
+                    shape,
+                }
+            }
+            Primitive::Disk { disk, shape } => {
+                let p = disk.to_world.transform_point3(Vec3::new(h.a, h.b, 0.0));
+                Hit {
+                    t: h.t,
+                    p,
+                    ng: disk.normal,
+                    ns: disk.normal,
+                    shape: *shape,
+                }
+            }
+        }
+    }
+}
+
+/// A bounds margin for shapes whose test is not the box's own arithmetic.
+#[inline]
+fn pad(center: Vec3, extent: f32) -> Vec3 {
+    (center.abs() + Vec3::splat(extent)) * 4e-6
+}
+
+/// Watertight ray–triangle test (two-sided).
+#[inline]
+fn intersect_triangle(p: &[Vec3; 3], r: &RayPre, tmin: f32, tmax: f32) -> Option<RawHit> {
+    let a = (p[0] - r.o).to_array();
+    let b = (p[1] - r.o).to_array();
+    let c = (p[2] - r.o).to_array();
+    let (kx, ky, kz) = (r.kx, r.ky, r.kz);
+    // Shear so that the ray runs along +z through the origin.
+    let ax = a[kx] - r.sx * a[kz];
+    let ay = a[ky] - r.sy * a[kz];
+    let bx = b[kx] - r.sx * b[kz];
+    let by = b[ky] - r.sy * b[kz];
+    let cx = c[kx] - r.sx * c[kz];
+    let cy = c[ky] - r.sy * c[kz];
+    let mut u = cx * by - cy * bx;
+    let mut v = ax * cy - ay * cx;
+    let mut w = bx * ay - by * ax;
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        // On an edge in single precision: decide in double so neighbours agree.
+        let (ax, ay, bx, by, cx, cy) = (
+            ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
+        );
+        u = (cx * by - cy * bx) as f32;
+        v = (ax * cy - ay * cx) as f32;
+        w = (bx * ay - by * ax) as f32;
+    }
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
+    }
+    let big_t = u * (r.sz * a[kz]) + v * (r.sz * b[kz]) + w * (r.sz * c[kz]);
+    let t = big_t / det;
+    if t > tmin && t < tmax {
+        Some(RawHit {
+            t,
+            a: u,
+            b: v,
+            c: w,
+        })
+    } else {
+        None
+    }
+}
+
+/// Ray–sphere test; the nearer root in `(tmin, tmax)`.
+///
+/// The discriminant is formed from the ray's perpendicular offset to the centre (small relative
+/// error even far away), and the two roots as `q` and `c/q` (no cancellation).
+#[inline]
+fn intersect_sphere(
+    center: Vec3,
+    radius: f32,
+    o: Vec3,
+    d: Vec3,
+    tmin: f32,
+    tmax: f32,
+) -> Option<RawHit> {
+    let f = o - center;
+    let a = d.length_squared();
+    let fd = f.dot(d);
+    let perp = f - d * (fd / a);
+    let r2 = radius * radius;
+    let disc = a * (r2 - perp.length_squared());
+    if disc < 0.0 {
+        return None;
+    }
+    let c = f.length_squared() - r2;
+    let b = -fd;
+    let q = b + disc.sqrt().copysign(b);
+    if q == 0.0 {
+        return None;
+    }
+    let (t0, t1) = {
+        let (x, y) = (c / q, q / a);
+        if x <= y { (x, y) } else { (y, x) }
+    };
+    let t = if t0 > tmin && t0 < tmax {
+        t0
+    } else if t1 > tmin && t1 < tmax {
+        t1
+    } else {
+        return None;
+    };
+    Some(RawHit {
+        t,
+        a: 0.0,
+        b: 0.0,
+        c: 0.0,
+    })
+}
+
+/// The root of smaller magnitude of `|f + t·d|² = r²` (`f` the origin relative to the
+/// centre), or `None` without real roots.
+#[inline]
+fn nearest_root(f: Vec3, d: Vec3, radius: f32) -> Option<f32> {
+    let a = d.length_squared();
+    let fd = f.dot(d);
+    let perp = f - d * (fd / a);
+    let r2 = radius * radius;
+    let disc = a * (r2 - perp.length_squared());
+    if !(disc >= 0.0) {
+        return None;
+    }
+    let b = -fd;
+    let q = b + disc.sqrt().copysign(b);
+    if q == 0.0 {
+        return None;
+    }
+    let (x, y) = ((f.length_squared() - r2) / q, q / a);
+    let t = if x.abs() <= y.abs() { x } else { y };
+    t.is_finite().then_some(t)
+}
+
+/// Ray–disk test in object space (the ray parameter is the same in both spaces).
+#[inline]
+fn intersect_disk(disk: &DiskData, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<RawHit> {
+    let oo = disk.to_object.transform_point3(o);
+    let od = disk.to_object.transform_vector3(d);
+    if od.z == 0.0 {
+        return None;
+    }
+    let t = -oo.z / od.z;
+    if !(t > tmin && t < tmax) {
+        return None;
+    }
+    let x = oo.x + t * od.x;
+    let y = oo.y + t * od.y;
+    if !(x * x + y * y <= 1.0) {
+        return None;
+    }
+    Some(RawHit {
+        t,
+        a: x,
+        b: y,
+        c: 0.0,
+    })
+}
+
+/// A point sampled on a shape for next-event estimation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShapeSample {
+    /// The point.
+    pub p: Vec3,
+    /// Unit front (geometric) normal there.
+    pub n: Vec3,
+    /// Density per unit solid angle at the reference point.
+    pub pdf: f32,
+}
+
+/// Samples points on one whole shape (for next-event estimation toward an area emitter).
+#[derive(Debug, Clone)]
+pub struct ShapeSampler {
+    kind: SamplerKind,
+    area: f32,
+}
+
+#[derive(Debug, Clone)]
+enum SamplerKind {
+    /// Triangles chosen by area (`cdf` holds the running sums, the last one the total area).
+    Mesh {
+        tris: Vec<[Vec3; 3]>,
+        normals: Vec<Vec3>,
+        cdf: Vec<f32>,
+    },
+    Sphere {
+        center: Vec3,
+        radius: f32,
+    },
+    Disk {
+        to_world: Mat4,
+        normal: Vec3,
+    },
+    /// Nothing to sample (degenerate geometry).
+    Empty,
+}
+
+/// The largest `f32` below one (keeps reused random numbers in `[0, 1)`).
+const ONE_MINUS_EPS: f32 = 1.0 - f32::EPSILON / 2.0;
+
+impl ShapeSampler {
+    /// A sampler for the whole of `g`.
+    pub fn new(g: &GeometryDesc) -> ShapeSampler {
+        match g {
+            GeometryDesc::Mesh(m) => {
+                let mut tris = Vec::new();
+                let mut normals = Vec::new();
+                let mut cdf = Vec::new();
+                let mut sum = 0.0f64;
+                for (_, p) in mesh_triangles(m) {
+                    let c = (p[1] - p[0]).cross(p[2] - p[0]);
+                    let len = c.length();
+                    if !(len > 0.0) || !len.is_finite() {
+                        continue;
+                    }
+                    sum += 0.5 * len as f64;
+                    tris.push(p);
+                    normals.push(c / len);
+                    cdf.push(sum as f32);
+                }
+                let area = sum as f32;
+                if tris.is_empty() || !(area > 0.0) || !area.is_finite() {
+                    return ShapeSampler::empty();
+                }
+                ShapeSampler {
+                    kind: SamplerKind::Mesh { tris, normals, cdf },
+                    area,
+                }
+            }
+            &GeometryDesc::Sphere { center, radius } => {
+                let area = 4.0 * PI * radius * radius;
+                if !(radius > 0.0) || !area.is_finite() || !center.is_finite() {
+                    return ShapeSampler::empty();
+                }
+                ShapeSampler {
+                    kind: SamplerKind::Sphere { center, radius },
+                    area,
+                }
+            }
+            GeometryDesc::Disk { to_world } => {
+                let Some(d) = disk_data(to_world) else {
+                    return ShapeSampler::empty();
+                };
+                let a = to_world.x_axis.truncate();
+                let b = to_world.y_axis.truncate();
+                let area = PI * a.cross(b).length();
+                if !(area > 0.0) || !area.is_finite() {
+                    return ShapeSampler::empty();
+                }
+                ShapeSampler {
+                    kind: SamplerKind::Disk {
+                        to_world: *to_world,
+                        normal: d.normal,
+                    },
+                    area,
+                }
+            }
+        }
+    }
+
+    fn empty() -> ShapeSampler {
+        ShapeSampler {
+            kind: SamplerKind::Empty,
+            area: 0.0,
+        }
+    }
+
+    /// Surface area of the shape.
+    pub fn area(&self) -> f32 {
+        self.area
+    }
+
+    /// Samples a point of the shape as seen from `from`: the point, its front normal and the
+    /// solid-angle density at `from`. `None` when the density would be zero or not finite
+    /// (grazing, degenerate, or `from` on the sampled point).
+    pub fn sample_direction(&self, from: Vec3, u: Vec2) -> Option<ShapeSample> {
+        let (p, n, pdf) = match &self.kind {
+            SamplerKind::Mesh { tris, normals, cdf } => {
+                let total = self.area;
+                let target = u.x * total;
+                let i = cdf.partition_point(|&c| c <= target).min(cdf.len() - 1);
+                let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
+                let w = cdf[i] - lo;
+                let ux = if w > 0.0 {
+                    ((target - lo) / w).clamp(0.0, ONE_MINUS_EPS)
+                } else {
+                    0.5
+                };
+                let b = sampling::square_to_triangle(Vec2::new(ux, u.y));
+                let t = &tris[i];
+                let p = t[0] + (t[1] - t[0]) * b.x + (t[2] - t[0]) * b.y;
+                let n = normals[i];
+                (p, n, area_to_solid_angle(1.0 / total, from, p, n))
+            }
+            &SamplerKind::Sphere { center, radius } => {
+                let w = from - center;
+                let dist2 = w.length_squared();
+                let r2 = radius * radius;
+                if dist2 > r2 {
+                    // Uniform in the cone of directions that sees the sphere.
+                    let dist = dist2.sqrt();
+                    let sin2_max = r2 / dist2;
+                    let sin_max = radius / dist;
+                    let one_minus_cos_max = one_minus_cos_max(sin2_max);
+                    let pdf = cone_pdf(one_minus_cos_max);
+                    if pdf == 0.0 {
+                        return None;
+                    }
+                    // 1 − cos θ uniform in [0, 1 − cos θmax].
+                    let omc = u.y * one_minus_cos_max;
+                    let cos_t = 1.0 - omc;
+                    let sin_t = (omc * (2.0 - omc)).max(0.0).sqrt();
+                    // The first hit along that direction, as an angle α at the centre between
+                    // the axis toward `from` and the point: sin β = sin θ / sin θmax is the
+                    // sine of the angle at the point, and α = β − θ.
+                    let sin_b = (sin_t / sin_max).min(1.0);
+                    let cos_b = (1.0 - sin_b * sin_b).max(0.0).sqrt();
+                    let cos_a = sin_b * sin_t + cos_b * cos_t;
+                    let sin_a = (sin_b * cos_t - cos_b * sin_t).max(0.0);
+                    let axis = w / dist;
+                    let frame = Frame::new(axis);
+                    let (sin_p, cos_p) = (2.0 * PI * u.x).sin_cos();
+                    let e = frame.s * cos_p + frame.t * sin_p;
+                    let n = (axis * cos_a + e * sin_a).normalize();
+                    (center + n * radius, n, pdf)
+                } else {
+                    // Inside: uniform on the whole surface.
+                    let n = sampling::square_to_uniform_sphere(u);
+                    let p = center + n * radius;
+                    (p, n, area_to_solid_angle(1.0 / self.area, from, p, n))
+                }
+            }
+            &SamplerKind::Disk { to_world, normal } => {
+                let q = sampling::square_to_disk(u);
+                let p = to_world.transform_point3(Vec3::new(q.x, q.y, 0.0));
+                (
+                    p,
+                    normal,
+                    area_to_solid_angle(1.0 / self.area, from, p, normal),
+                )
+            }
+            SamplerKind::Empty => return None,
+        };
+        (pdf > 0.0 && pdf.is_finite()).then_some(ShapeSample { p, n, pdf })
+    }
+
+    /// The solid-angle density with which [`ShapeSampler::sample_direction`] produces the point
+    /// `p` (front normal `n`) of this shape seen from `from`. For a sphere seen from outside,
+    /// `p` is taken to be on the visible cap (as the first hit of any ray from `from` is).
+    pub fn pdf_direction(&self, from: Vec3, p: Vec3, n: Vec3) -> f32 {
+        let pdf = match &self.kind {
+            SamplerKind::Mesh { .. } | SamplerKind::Disk { .. } => {
+                area_to_solid_angle(1.0 / self.area, from, p, n)
+            }
+            &SamplerKind::Sphere { center, radius } => {
+                let dist2 = (from - center).length_squared();
+                let r2 = radius * radius;
+                if dist2 > r2 {
+                    cone_pdf(one_minus_cos_max(r2 / dist2))
+                } else {
+                    area_to_solid_angle(1.0 / self.area, from, p, n)
+                }
+            }
+            SamplerKind::Empty => 0.0,
+        };
+        if pdf.is_finite() { pdf } else { 0.0 }
+    }
+}
+
+/// `1 − cos θmax` from `sin² θmax`, without cancellation for small cones.
+#[inline]
+fn one_minus_cos_max(sin2_max: f32) -> f32 {
+    let cos_max = (1.0 - sin2_max).max(0.0).sqrt();
+    sin2_max / (1.0 + cos_max)
+}
+
+/// Density of a uniform cone of the given `1 − cos θmax` (0 when it is not finite).
+#[inline]
+fn cone_pdf(one_minus_cos_max: f32) -> f32 {
+    let pdf = 1.0 / (2.0 * PI * one_minus_cos_max);
+    if pdf.is_finite() { pdf } else { 0.0 }
+}
+
+/// Converts an area density at `p` (normal `n`) to a solid-angle density at `from`:
+/// `pdf_area · dist² / |cos|`, 0 for grazing or coincident points.
+#[inline]
+fn area_to_solid_angle(pdf_area: f32, from: Vec3, p: Vec3, n: Vec3) -> f32 {
+    let d = p - from;
+    let dist2 = d.length_squared();
+    if !(dist2 > 0.0) {
+        return 0.0;
+    }
+    let cos = n.dot(d).abs() / dist2.sqrt();
+    if !(cos > 0.0) {
+        return 0.0;
+    }
+    let pdf = pdf_area * dist2 / cos;
+    if pdf.is_finite() { pdf } else { 0.0 }
+}

@@ -1,0 +1,41 @@
+//! The renderable scene built from a [`SceneDesc`]: BVH, per-shape BSDFs, emitters, camera.
+
+use super::bsdf::Bsdf;
+use super::bvh::Bvh;
+use super::camera::Camera;
+use super::light::Lights;
+use super::scene::{IntegratorDesc, SceneDesc};
+use super::shapes::primitives;
+
+/// Everything the integrator reads; immutable while rendering, shared by all threads.
+#[derive(Debug)]
+pub struct World {
+    /// Acceleration structure over every primitive of every shape.
+    pub bvh: Bvh,
+    /// One BSDF per shape, indexed by the shape index a hit carries.
+    pub bsdfs: Vec<Bsdf>,
+    /// The emitters.
+    pub lights: Lights,
+    /// The sensor.
+    pub camera: Camera,
+    /// Path length and Russian roulette settings.
+    pub integrator: IntegratorDesc,
+}
+
+impl World {
+    /// Builds the world of a scene description.
+    pub fn new(scene: &SceneDesc) -> Self {
+        let mut prims = Vec::new();
+        for (i, shape) in scene.shapes.iter().enumerate() {
+            prims.extend(primitives(i as u32, &shape.geometry));
+        }
+        let bvh = Bvh::build(prims);
+        World {
+            bvh,
+            bsdfs: scene.shapes.iter().map(|s| Bsdf::from_desc(&s.bsdf)).collect(),
+            lights: Lights::new(scene),
+            camera: Camera::new(&scene.camera),
+            integrator: scene.integrator,
+        }
+    }
+}
