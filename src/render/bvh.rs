@@ -13,6 +13,7 @@
 //! triangle test would hit.
 
 use super::shapes::{Hit, Primitive, RawHit, Ray, RayPre};
+use arrayvec::ArrayVec;
 use glam::{BVec3A, Vec3, Vec3A};
 
 /// Largest number of primitives in a leaf.
@@ -35,6 +36,9 @@ const STACK: usize = MEDIAN_DEPTH + 40;
 /// `1 + 2γ₃` with `γₙ = nε/(1 − nε)`, `ε` half an ulp of one.
 const FAR_SCALE: f32 =
     1.0 + 2.0 * (3.0 * (f32::EPSILON * 0.5)) / (1.0 - 3.0 * (f32::EPSILON * 0.5));
+
+/// Smallest magnitude of a direction component in the slab test (see [`Trav::new`]).
+const MIN_DIRECTION: f32 = 1e-20;
 
 /// One node: bounds, then for a leaf the first primitive and the count, for an interior node
 /// the index of the second child and a count of 0.
@@ -111,7 +115,13 @@ struct Trav {
 impl Trav {
     #[inline]
     fn new(ray: &Ray) -> Trav {
-        let inv = Vec3A::ONE / Vec3A::from(ray.d);
+        // A zero direction component becomes a tiny one of the same sign: the inverse stays
+        // finite, so `(bound − o)·inv` is never `0·∞ = NaN` and the slab test needs no NaN
+        // handling. Such a ray is parallel to the slab to within 1e-20 radians.
+        let d = Vec3A::from(ray.d);
+        let tiny = Vec3A::splat(MIN_DIRECTION).copysign(d);
+        let d = Vec3A::select(d.abs().cmplt(Vec3A::splat(MIN_DIRECTION)), tiny, d);
+        let inv = Vec3A::ONE / d;
         Trav {
             pre: RayPre::new(ray),
             o: ray.o.into(),
@@ -131,9 +141,6 @@ impl Trav {
         let t1 = (Vec3A::from(n.bounds[1]) - self.o) * self.inv;
         let near = Vec3A::select(self.neg, t1, t0);
         let far = Vec3A::select(self.neg, t0, t1);
-        // A NaN lane (0·∞: the origin on a plane parallel to the ray) constrains nothing.
-        let near = Vec3A::select(near.cmpeq(near), near, Vec3A::NEG_INFINITY);
-        let far = Vec3A::select(far.cmpeq(far), far, Vec3A::INFINITY);
         let t_near = fmax(near.max_element(), tmin);
         let t_far = fmin(far.min_element() * FAR_SCALE, tmax);
         (t_near <= t_far).then_some(t_near)
@@ -236,8 +243,9 @@ impl Bvh {
         if tr.hit_box(root, tmin, t_best).is_none() {
             return false;
         }
-        let mut stack = [(0u32, 0.0f32); STACK];
-        let mut sp = 0usize;
+        // ArrayVec: no zero-fill of the whole stack on every ray (that memset was 3% of a
+        // render's instructions).
+        let mut stack: ArrayVec<(u32, f32), STACK> = ArrayVec::new();
         let mut node = 0usize;
         loop {
             let n = &self.nodes[node];
@@ -262,8 +270,7 @@ impl Bvh {
                 match (hl, hr) {
                     (Some(tl), Some(tr_)) => {
                         let (near, far, tfar) = if tl <= tr_ { (l, r, tr_) } else { (r, l, tl) };
-                        stack[sp] = (far as u32, tfar);
-                        sp += 1;
+                        stack.push((far as u32, tfar));
                         node = near;
                         continue;
                     }
@@ -280,11 +287,9 @@ impl Bvh {
             }
             // Pop the next box that may still hold something nearer.
             loop {
-                if sp == 0 {
+                let Some((nd, t_enter)) = stack.pop() else {
                     return best.is_some();
-                }
-                sp -= 1;
-                let (nd, t_enter) = stack[sp];
+                };
                 if t_enter <= t_best {
                     node = nd as usize;
                     break;
