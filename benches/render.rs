@@ -23,7 +23,10 @@ const THREADS: usize = 2;
 const SPP: u32 = 16;
 
 fn specs(names: &[&str]) -> Vec<EstimatorSpec> {
-    names.iter().map(|s| s.parse().expect("valid spec")).collect()
+    names
+        .iter()
+        .map(|s| s.parse().expect("valid spec"))
+        .collect()
 }
 
 fn bench(c: &mut Criterion) {
@@ -40,7 +43,8 @@ fn bench(c: &mut Criterion) {
         ("constant-memory-9", specs(&CONSTANT_MEMORY_SET)),
         ("all-12", specs(&all)),
     ];
-    let samples = u64::from(world.camera.width()) * u64::from(world.camera.height()) * u64::from(SPP);
+    let samples =
+        u64::from(world.camera.width()) * u64::from(world.camera.height()) * u64::from(SPP);
     let mut group = c.benchmark_group("render-cbox");
     group.throughput(Throughput::Elements(samples));
     group.sample_size(10);
@@ -53,7 +57,9 @@ fn bench(c: &mut Criterion) {
             dump_pixels: vec![],
         };
         group.bench_with_input(BenchmarkId::new("film", name), &cfg, |b, cfg| {
-            b.iter(|| pool.install(|| black_box(film::render(&world, cfg, |_| {}).expect("renders"))))
+            b.iter(|| {
+                pool.install(|| black_box(film::render(&world, cfg, |_| {}).expect("renders")))
+            })
         });
     }
     group.finish();

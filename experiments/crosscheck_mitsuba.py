@@ -414,6 +414,7 @@ def crosscheck(path: Path, args, seeds: list) -> dict:
 
 
 def main() -> None:
+    global FAMILY_ALPHA
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("scene_args", nargs="*", metavar="SCENE", type=Path,
                         help="scene files (default: ../shared/scenes/*.xml and "
@@ -429,6 +430,9 @@ def main() -> None:
                         help=f"block size in pixels (default {DEFAULT_BLOCK})")
     parser.add_argument("--threads", type=int, default=os.cpu_count() or 1,
                         help="threads for both renderers (default: all cores)")
+    parser.add_argument("--alpha", type=float, default=FAMILY_ALPHA,
+                        help=f"family-wise level of the block tests of one scene "
+                        f"(default {FAMILY_ALPHA}; CI uses 0.001 over its four scenes)")
     parser.add_argument("--quick", action="store_true",
                         help=f"fewer samples and seeds ({QUICK_SPP} spp, {QUICK_SEEDS} seeds) "
                              f"unless given")
@@ -441,6 +445,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
                         help=f"report folder (default {os.path.relpath(DEFAULT_OUT, ROOT)})")
     args = parser.parse_args()
+    if not 0.0 < args.alpha < 1.0:
+        parser.error(f"--alpha must be in (0, 1), got {args.alpha}")
+    FAMILY_ALPHA = args.alpha
     if args.spp is None:
         args.spp = QUICK_SPP if args.quick else DEFAULT_SPP
     if args.seeds is None:

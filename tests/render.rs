@@ -225,10 +225,16 @@ fn cbox() -> World {
 
 fn film_config(spp: u32, checkpoints: Vec<u32>) -> FilmConfig {
     FilmConfig {
-        estimators: ["mean", "gmon:M=5", "zirr", "pajot-rot", "jung:sigma_image=1"]
-            .iter()
-            .map(|s| s.parse::<EstimatorSpec>().unwrap())
-            .collect(),
+        estimators: [
+            "mean",
+            "gmon:M=5",
+            "zirr",
+            "pajot-rot",
+            "jung:sigma_image=1",
+        ]
+        .iter()
+        .map(|s| s.parse::<EstimatorSpec>().unwrap())
+        .collect(),
         spp,
         checkpoints,
         seed: 11,

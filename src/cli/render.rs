@@ -115,18 +115,20 @@ pub fn run(args: &RenderArgs) -> Result<ExitCode> {
     let start = Instant::now();
     let world = World::new(&scene);
     let build_s = start.elapsed().as_secs_f64();
-    let out = pool.install(|| film::render(&world, &cfg, |done| bar.set_position(u64::from(done))))?;
+    let out =
+        pool.install(|| film::render(&world, &cfg, |done| bar.set_position(u64::from(done))))?;
     let wall_s = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
 
     let mut written = Vec::new();
     for img in &out.images {
         let stem = file_stem(&cfg.estimators[img.estimator]);
-        let mut names = vec![format!("{stem}@{}", img.spp)];
+        let mut names = Vec::new();
         if img.spp == cfg.spp {
-            names.insert(0, stem);
-        } else if !cfg.checkpoints.contains(&img.spp) {
-            continue;
+            names.push(stem.clone());
+        }
+        if cfg.checkpoints.contains(&img.spp) {
+            names.push(format!("{stem}@{}", img.spp));
         }
         for name in names {
             img.image.write_exr(&args.out.join(format!("{name}.exr")))?;
@@ -140,7 +142,10 @@ pub fn run(args: &RenderArgs) -> Result<ExitCode> {
         for v in stream {
             text.push_str(&format!("{v:e}\n"));
         }
-        write_atomic(&args.out.join(format!("pixel_{x}_{y}.txt")), text.as_bytes())?;
+        write_atomic(
+            &args.out.join(format!("pixel_{x}_{y}.txt")),
+            text.as_bytes(),
+        )?;
     }
     let report = serde_json::json!({
         "scene": args.scene.display().to_string(),
@@ -153,6 +158,7 @@ pub fn run(args: &RenderArgs) -> Result<ExitCode> {
         "checkpoints": cfg.checkpoints,
         "wall_s": wall_s,
         "build_s": build_s,
+        "estimate_s": out.estimate_seconds,
         "samples": out.samples,
         "samples_per_s": out.samples as f64 / wall_s,
         "invalid_samples": out.invalid_samples,

@@ -16,6 +16,7 @@ use crate::error::{Error, Result};
 use crate::estimators::{EstimatorSpec, RgbEstimator, Welford, build_rgb, luminance};
 use crate::image::Image;
 use rayon::prelude::*;
+use std::time::Instant;
 
 /// What to render and what to keep.
 #[derive(Debug, Clone)]
@@ -56,6 +57,9 @@ pub struct FilmOutput {
     pub state_bytes: Vec<f64>,
     /// The raw luminance stream of each dumped pixel, in sample order (valid samples only).
     pub dumps: Vec<((u32, u32), Vec<f64>)>,
+    /// Wall-clock seconds spent reading estimates into images (all checkpoints), which is
+    /// paid per pixel, not per sample; the rest of the render is tracing and pushing.
+    pub estimate_seconds: f64,
 }
 
 /// Per-pixel state: one RGB estimator per configured spec.
@@ -128,19 +132,18 @@ pub fn render(world: &World, cfg: &FilmConfig, mut on_pass: impl FnMut(u32)) -> 
     let mut invalid = 0u64;
     let mut images = Vec::new();
     let mut done = 0u32;
+    let mut estimate_seconds = 0.0;
 
     for &stop in &stops {
         let reports: Vec<RowReport> = pixels
             .par_chunks_mut(width as usize)
             .enumerate()
-            .map(|(y, row)| {
-                render_row(world, cfg.seed, y as u32, row, done, stop, &dump_index)
-            })
+            .map(|(y, row)| render_row(world, cfg.seed, y as u32, row, done, stop, &dump_index))
             .collect();
         for r in reports {
             invalid += r.invalid;
-            for c in 0..3 {
-                sigma[c].merge(&r.sigma[c]);
+            for (acc, part) in sigma.iter_mut().zip(&r.sigma) {
+                acc.merge(part);
             }
             for (i, stream) in r.dumps {
                 dumps[i].extend(stream);
@@ -154,6 +157,7 @@ pub fn render(world: &World, cfg: &FilmConfig, mut on_pass: impl FnMut(u32)) -> 
                 .try_for_each(|e| e.set_image_sigma(image_sigma))
         })?;
         if cfg.checkpoints.contains(&stop) || stop == cfg.spp {
+            let start = Instant::now();
             for e in 0..cfg.estimators.len() {
                 images.push(FilmImage {
                     estimator: e,
@@ -161,6 +165,7 @@ pub fn render(world: &World, cfg: &FilmConfig, mut on_pass: impl FnMut(u32)) -> 
                     image: read_image(&pixels, width, height, e)?,
                 });
             }
+            estimate_seconds += start.elapsed().as_secs_f64();
         }
         on_pass(stop);
     }
@@ -182,6 +187,7 @@ pub fn render(world: &World, cfg: &FilmConfig, mut on_pass: impl FnMut(u32)) -> 
         samples: u64::from(width) * u64::from(height) * u64::from(cfg.spp),
         state_bytes,
         dumps: cfg.dump_pixels.iter().copied().zip(dumps).collect(),
+        estimate_seconds,
     })
 }
 
@@ -212,8 +218,8 @@ fn render_row(
             }
         }
         for v in &samples {
-            for c in 0..3 {
-                report.sigma[c].push(v[c]);
+            for (acc, &x) in report.sigma.iter_mut().zip(v) {
+                acc.push(x);
             }
         }
         for e in &mut pixel.estimators {

@@ -45,7 +45,10 @@ fn shadow_ray(hit: &Hit, wi: Vec3, dist: f32) -> (Ray, f32) {
     let to = target - ray.o;
     let len = to.length();
     let margin = RAY_OFFSET * (1.0 + target.abs().max_element());
-    let ray = Ray { o: ray.o, d: to / len };
+    let ray = Ray {
+        o: ray.o,
+        d: to / len,
+    };
     (ray, (len - margin).max(0.0))
 }
 

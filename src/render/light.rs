@@ -116,11 +116,10 @@ impl Lights {
     /// The environment's radiance, seen by a ray that escapes the scene.
     #[inline]
     pub fn environment(&self) -> Option<Rgb> {
-        self.environment
-            .map(|i| match &self.emitters[i as usize] {
-                Emitter::Environment { radiance } => *radiance,
-                _ => Rgb::ZERO,
-            })
+        self.environment.map(|i| match &self.emitters[i as usize] {
+            Emitter::Environment { radiance } => *radiance,
+            _ => Rgb::ZERO,
+        })
     }
 
     /// Density with which [`Lights::sample`] would have chosen an escaping direction.

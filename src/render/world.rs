@@ -32,7 +32,11 @@ impl World {
         let bvh = Bvh::build(prims);
         World {
             bvh,
-            bsdfs: scene.shapes.iter().map(|s| Bsdf::from_desc(&s.bsdf)).collect(),
+            bsdfs: scene
+                .shapes
+                .iter()
+                .map(|s| Bsdf::from_desc(&s.bsdf))
+                .collect(),
             lights: Lights::new(scene),
             camera: Camera::new(&scene.camera),
             integrator: scene.integrator,
