@@ -37,9 +37,6 @@ const STACK: usize = MEDIAN_DEPTH + 40;
 const FAR_SCALE: f32 =
     1.0 + 2.0 * (3.0 * (f32::EPSILON * 0.5)) / (1.0 - 3.0 * (f32::EPSILON * 0.5));
 
-/// Smallest magnitude of a direction component in the slab test (see [`Trav::new`]).
-const MIN_DIRECTION: f32 = 1e-20;
-
 /// One node: bounds, then for a leaf the first primitive and the count, for an interior node
 /// the index of the second child and a count of 0.
 #[derive(Debug, Clone, Copy)]
@@ -115,13 +112,7 @@ struct Trav {
 impl Trav {
     #[inline]
     fn new(ray: &Ray) -> Trav {
-        // A zero direction component becomes a tiny one of the same sign: the inverse stays
-        // finite, so `(bound − o)·inv` is never `0·∞ = NaN` and the slab test needs no NaN
-        // handling. Such a ray is parallel to the slab to within 1e-20 radians.
-        let d = Vec3A::from(ray.d);
-        let tiny = Vec3A::splat(MIN_DIRECTION).copysign(d);
-        let d = Vec3A::select(d.abs().cmplt(Vec3A::splat(MIN_DIRECTION)), tiny, d);
-        let inv = Vec3A::ONE / d;
+        let inv = Vec3A::ONE / Vec3A::from(ray.d);
         Trav {
             pre: RayPre::new(ray),
             o: ray.o.into(),
@@ -141,6 +132,9 @@ impl Trav {
         let t1 = (Vec3A::from(n.bounds[1]) - self.o) * self.inv;
         let near = Vec3A::select(self.neg, t1, t0);
         let far = Vec3A::select(self.neg, t0, t1);
+        // A NaN lane (0·∞: the origin on a plane parallel to the ray) constrains nothing.
+        let near = Vec3A::select(near.cmpeq(near), near, Vec3A::NEG_INFINITY);
+        let far = Vec3A::select(far.cmpeq(far), far, Vec3A::INFINITY);
         let t_near = fmax(near.max_element(), tmin);
         let t_far = fmin(far.min_element() * FAR_SCALE, tmax);
         (t_near <= t_far).then_some(t_near)

@@ -133,12 +133,29 @@ pub fn render(world: &World, cfg: &FilmConfig, mut on_pass: impl FnMut(u32)) -> 
     let mut images = Vec::new();
     let mut done = 0u32;
     let mut estimate_seconds = 0.0;
+    // Only Jung's image mode reads the image-wide σ; its Welford update costs a division per
+    // channel and sample, so the film skips it otherwise.
+    let image_sigma = cfg
+        .estimators
+        .iter()
+        .any(|s| matches!(s, EstimatorSpec::Jung { .. }));
 
     for &stop in &stops {
         let reports: Vec<RowReport> = pixels
             .par_chunks_mut(width as usize)
             .enumerate()
-            .map(|(y, row)| render_row(world, cfg.seed, y as u32, row, done, stop, &dump_index))
+            .map(|(y, row)| {
+                let span = (done, stop);
+                render_row(
+                    world,
+                    cfg.seed,
+                    y as u32,
+                    row,
+                    span,
+                    image_sigma,
+                    &dump_index,
+                )
+            })
             .collect();
         for r in reports {
             invalid += r.invalid;
@@ -150,12 +167,14 @@ pub fn render(world: &World, cfg: &FilmConfig, mut on_pass: impl FnMut(u32)) -> 
             }
         }
         done = stop;
-        let image_sigma = [sigma[0].sigma(), sigma[1].sigma(), sigma[2].sigma()];
-        pixels.par_iter_mut().try_for_each(|p| {
-            p.estimators
-                .iter_mut()
-                .try_for_each(|e| e.set_image_sigma(image_sigma))
-        })?;
+        if image_sigma {
+            let sigma = [sigma[0].sigma(), sigma[1].sigma(), sigma[2].sigma()];
+            pixels.par_iter_mut().try_for_each(|p| {
+                p.estimators
+                    .iter_mut()
+                    .try_for_each(|e| e.set_image_sigma(sigma))
+            })?;
+        }
         if cfg.checkpoints.contains(&stop) || stop == cfg.spp {
             let start = Instant::now();
             for e in 0..cfg.estimators.len() {
@@ -191,14 +210,15 @@ pub fn render(world: &World, cfg: &FilmConfig, mut on_pass: impl FnMut(u32)) -> 
     })
 }
 
-/// Traces samples `[s0, s1)` of every pixel of row `y` and pushes them into its estimators.
+/// Traces samples `[s0, s1)` of every pixel of row `y` and pushes them into its estimators
+/// (and, with `image_sigma`, into the row's per-channel Welford accumulators).
 fn render_row(
     world: &World,
     seed: u64,
     y: u32,
     row: &mut [Pixel],
-    s0: u32,
-    s1: u32,
+    (s0, s1): (u32, u32),
+    image_sigma: bool,
     dump_index: &[usize],
 ) -> RowReport {
     let width = row.len();
@@ -217,9 +237,11 @@ fn render_row(
                 report.invalid += 1;
             }
         }
-        for v in &samples {
-            for (acc, &x) in report.sigma.iter_mut().zip(v) {
-                acc.push(x);
+        if image_sigma {
+            for v in &samples {
+                for (acc, &x) in report.sigma.iter_mut().zip(v) {
+                    acc.push(x);
+                }
             }
         }
         for e in &mut pixel.estimators {
