@@ -1,7 +1,10 @@
 //! Warps from the unit square to the shapes the renderer samples, with their densities.
 //!
-//! Each warp takes uniform numbers in `[0, 1)` and is measure-preserving up to its stated pdf;
-//! `tests/render_sampling.rs` checks every pair with a chi-square test.
+//! Each warp takes uniform numbers in `[0, 1)` and is measure-preserving up to its stated pdf.
+//! They are tested where they are used: the cosine hemisphere by the BSDF chi-square tests
+//! (`tests/render_bsdf.rs`), the cone, disk and triangle maps by the solid-angle and pdf checks
+//! of the shape samplers (`tests/render_geometry.rs`), the sphere by the white furnaces
+//! (`tests/render.rs`).
 
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
