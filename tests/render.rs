@@ -34,7 +34,8 @@ fn sensor(origin: &str, target: &str, up: &str, fov: f32, size: u32) -> String {
     )
 }
 
-/// Mean and standard error of the luminance-free channel means over `n` samples of every pixel.
+/// Mean and standard error of `(r + g + b) / 3` over `n` samples of every pixel, and the number
+/// of invalid (non-finite or negative) samples, which are left out.
 fn pixel_stats(w: &World, n: u32, seed: u64) -> (f64, f64, u64) {
     let (width, height) = (w.camera.width(), w.camera.height());
     let (mut sum, mut sum2, mut count, mut bad) = (0.0f64, 0.0f64, 0u64, 0u64);
@@ -120,24 +121,36 @@ fn white_furnace_mirror_sphere_is_exact() {
     }
 }
 
+/// Direct light only (`max_depth` 2) on a 20x20 Lambertian floor of albedo 0.5 at `y = 0`
+/// facing up, lit by `light` and seen by `camera` (one pixel).
+fn lit_floor(light: &str, camera: &str) -> World {
+    world(&format!(
+        r#"<scene version="3.0.0">
+            <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+            {camera}
+            {light}
+            <shape type="rectangle">
+                <transform name="to_world"><rotate x="1" angle="-90"/><scale value="10"/></transform>
+                <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>
+            </shape>
+        </scene>"#
+    ))
+}
+
+/// A one-pixel camera aimed at the floor point below the lights, from the side.
+fn side_camera() -> String {
+    sensor("0, 0.6, 2", "0, 0, 0", "0, 1, 0", 0.2, 1)
+}
+
 /// Lambertian floor of albedo 0.5 under a point light of intensity 10 at height 1, seen head-on
 /// through a 0.2° field of view: Lo = ρ/π · I/h² exactly at the centre (the footprint changes it
 /// by < 1e-5). No randomness reaches the value except the position inside the pixel.
 #[test]
 fn point_light_on_diffuse_floor_matches_closed_form() {
-    let xml = format!(
-        r#"<scene version="3.0.0">
-            <integrator type="path"><integer name="max_depth" value="2"/></integrator>
-            {}
-            <emitter type="point"><rgb name="intensity" value="10"/><point name="position" value="0, 1, 0"/></emitter>
-            <shape type="rectangle">
-                <transform name="to_world"><rotate x="1" angle="-90"/><scale value="10"/></transform>
-                <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>
-            </shape>
-        </scene>"#,
-        sensor("0, 3, 0", "0, 0, 0", "0, 0, 1", 0.2, 1)
+    let w = lit_floor(
+        r#"<emitter type="point"><rgb name="intensity" value="10"/><point name="position" value="0, 1, 0"/></emitter>"#,
+        &sensor("0, 3, 0", "0, 0, 0", "0, 0, 1", 0.2, 1),
     );
-    let w = world(&xml);
     let exact = 0.5 / std::f64::consts::PI * 10.0;
     let (mean, _, bad) = pixel_stats(&w, 64, 4);
     assert_eq!(bad, 0);
@@ -150,22 +163,13 @@ fn point_light_on_diffuse_floor_matches_closed_form() {
 /// catches a relative bias of about 1.5%.
 #[test]
 fn disk_light_on_diffuse_floor_matches_closed_form() {
-    let xml = format!(
-        r#"<scene version="3.0.0">
-            <integrator type="path"><integer name="max_depth" value="2"/></integrator>
-            {}
-            <shape type="disk">
-                <transform name="to_world"><scale value="0.5"/><rotate x="1" angle="90"/><translate y="1"/></transform>
-                <emitter type="area"><rgb name="radiance" value="2"/></emitter>
-            </shape>
-            <shape type="rectangle">
-                <transform name="to_world"><rotate x="1" angle="-90"/><scale value="10"/></transform>
-                <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>
-            </shape>
-        </scene>"#,
-        sensor("0, 0.6, 2", "0, 0, 0", "0, 1, 0", 0.2, 1)
+    let w = lit_floor(
+        r#"<shape type="disk">
+            <transform name="to_world"><scale value="0.5"/><rotate x="1" angle="90"/><translate y="1"/></transform>
+            <emitter type="area"><rgb name="radiance" value="2"/></emitter>
+        </shape>"#,
+        &side_camera(),
     );
-    let w = world(&xml);
     let exact = 0.5 * 2.0 * 0.25 / (0.25 + 1.0);
     let (mean, se, bad) = pixel_stats(&w, 40_000, 5);
     assert_eq!(bad, 0);
@@ -177,22 +181,13 @@ fn disk_light_on_diffuse_floor_matches_closed_form() {
 /// 40000 samples; catches a relative bias of about 1.5%.
 #[test]
 fn sphere_light_on_diffuse_floor_matches_closed_form() {
-    let xml = format!(
-        r#"<scene version="3.0.0">
-            <integrator type="path"><integer name="max_depth" value="2"/></integrator>
-            {}
-            <shape type="sphere">
-                <point name="center" value="0, 1, 0"/><float name="radius" value="0.25"/>
-                <emitter type="area"><rgb name="radiance" value="3"/></emitter>
-            </shape>
-            <shape type="rectangle">
-                <transform name="to_world"><rotate x="1" angle="-90"/><scale value="10"/></transform>
-                <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>
-            </shape>
-        </scene>"#,
-        sensor("0, 0.6, 2", "0, 0, 0", "0, 1, 0", 0.2, 1)
+    let w = lit_floor(
+        r#"<shape type="sphere">
+            <point name="center" value="0, 1, 0"/><float name="radius" value="0.25"/>
+            <emitter type="area"><rgb name="radiance" value="3"/></emitter>
+        </shape>"#,
+        &side_camera(),
     );
-    let w = world(&xml);
     let exact = 0.5 * 3.0 * 0.0625;
     let (mean, se, bad) = pixel_stats(&w, 40_000, 6);
     assert_eq!(bad, 0);
