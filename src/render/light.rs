@@ -10,7 +10,7 @@ use glam::{Vec2, Vec3};
 /// One emitter.
 #[derive(Debug, Clone)]
 enum Emitter {
-    /// An `area` emitter on shape `shape`.
+    /// An `area` emitter; `sampler` draws points on its shape.
     Area {
         sampler: ShapeSampler,
         radiance: Rgb,
