@@ -83,11 +83,10 @@ impl Camera {
             (1.0 - 2.0 * fy) * self.tan_half.y,
             1.0,
         );
-        let inv_len = local.length_recip();
-        let d = self.to_world.transform_vector3(local * inv_len).normalize();
+        let d = self.to_world.transform_vector3(local).normalize();
         // The clipping planes are perpendicular to the view axis: distance along the ray
         // scales with 1/cos of the angle to it, which is `inv_len` on the unit-z plane.
-        let cos = inv_len;
+        let cos = local.length_recip();
         CameraRay {
             ray: Ray { o: self.origin, d },
             tmin: self.near_clip / cos,
