@@ -85,7 +85,7 @@ impl Camera {
         );
         let d = self.to_world.transform_vector3(local).normalize();
         // The clipping planes are perpendicular to the view axis: distance along the ray
-        // scales with 1/cos of the angle to it, which is `inv_len` on the unit-z plane.
+        // scales with 1/cos of the angle to it, which is 1/|local| on the unit-z plane.
         let cos = local.length_recip();
         CameraRay {
             ray: Ray { o: self.origin, d },
