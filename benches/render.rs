@@ -55,6 +55,7 @@ fn bench(c: &mut Criterion) {
             checkpoints: vec![],
             seed: 1,
             dump_pixels: vec![],
+            memory: Default::default(),
         };
         group.bench_with_input(BenchmarkId::new("film", name), &cfg, |b, cfg| {
             b.iter(|| {

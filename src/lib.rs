@@ -19,6 +19,7 @@ pub mod error;
 pub mod estimators;
 pub mod harness;
 pub mod image;
+pub mod limits;
 pub mod render;
 pub mod report;
 pub mod samples;

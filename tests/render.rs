@@ -234,6 +234,7 @@ fn film_config(spp: u32, checkpoints: Vec<u32>) -> FilmConfig {
         checkpoints,
         seed: 11,
         dump_pixels: vec![(64, 64)],
+        memory: Default::default(),
     }
 }
 

@@ -3,6 +3,7 @@
 
 use clap::Args;
 use fireflies::harness::{self, RunOptions, gate};
+use fireflies::limits::MemoryLimit;
 use fireflies::report::{self, tables};
 use fireflies::{Error, Result};
 use std::io::IsTerminal;
@@ -36,7 +37,7 @@ pub struct GateArgs {
     seed: Option<u64>,
 }
 
-pub fn run(args: &GateArgs) -> Result<ExitCode> {
+pub fn run(args: &GateArgs, memory: MemoryLimit) -> Result<ExitCode> {
     let exp = super::run::load(Some(&args.experiment), args.seed)?;
     let results = match &args.results {
         Some(dir) => dir.join("results.csv"),
@@ -51,6 +52,7 @@ pub fn run(args: &GateArgs) -> Result<ExitCode> {
                 threads: args.threads,
                 progress: std::io::stderr().is_terminal(),
                 build: None,
+                memory,
             };
             let out = harness::run(&exp, &opts)?;
             let checks = harness::checks::evaluate(&exp, &out);

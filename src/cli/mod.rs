@@ -8,6 +8,7 @@ mod run;
 
 use clap::{Parser, Subcommand};
 use fireflies::Result;
+use fireflies::limits::MemoryLimit;
 use std::process::ExitCode;
 
 /// Validates robust Monte Carlo pixel estimators on heavy-tailed samples.
@@ -16,6 +17,11 @@ use std::process::ExitCode;
 pub struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
+    /// The most memory a run or render may plan to hold, e.g. `8GiB` (default: the
+    /// FIREFLIES_MAX_MEMORY environment variable, else 3/4 of physical memory). A plan above
+    /// it is refused before anything is allocated.
+    #[arg(long, global = true, value_name = "SIZE")]
+    max_memory: Option<String>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -34,12 +40,13 @@ enum Command {
 
 /// Runs the chosen subcommand; `Err` exits with status 2.
 pub fn run(cli: Cli) -> Result<ExitCode> {
+    let memory = MemoryLimit::from_setting(cli.max_memory.as_deref())?;
     match cli.command {
         Some(Command::Eval(args)) => eval::run(&args),
-        Some(Command::Run(args)) => run::run(&args),
+        Some(Command::Run(args)) => run::run(&args, memory),
         Some(Command::Merge(args)) => merge::run(&args),
-        Some(Command::Gate(args)) => gate::run(&args),
-        Some(Command::Render(args)) => render::run(&args),
-        None => run::run(&run::RunArgs::default()),
+        Some(Command::Gate(args)) => gate::run(&args, memory),
+        Some(Command::Render(args)) => render::run(&args, memory),
+        None => run::run(&run::RunArgs::default(), memory),
     }
 }

@@ -3,6 +3,7 @@
 
 use clap::Args;
 use fireflies::estimators::EstimatorSpec;
+use fireflies::limits::{self, MemoryLimit, shorten};
 use fireflies::render::film::{self, FilmConfig};
 use fireflies::render::mitsuba;
 use fireflies::render::world::World;
@@ -62,17 +63,35 @@ pub fn parse_estimator_list(text: &str) -> Result<Vec<EstimatorSpec>> {
     items.iter().map(|t| t.parse()).collect()
 }
 
-/// Parses `x,y;x,y`.
+/// Parses `x,y;x,y`. A well-formed coordinate beyond any image is reported as out of range
+/// (the film then names the image size), not as malformed.
 fn parse_pixels(text: &str) -> Result<Vec<(u32, u32)>> {
     text.split(';')
         .filter(|t| !t.trim().is_empty())
         .map(|t| {
-            let bad = || Error::param("dump-pixels", t.to_string(), "expected x,y");
-            let (x, y) = t.split_once(',').ok_or_else(bad)?;
-            Ok((
-                x.trim().parse().map_err(|_| bad())?,
-                y.trim().parse().map_err(|_| bad())?,
-            ))
+            let shown = shorten(t);
+            let (x, y) = t.split_once(',').ok_or_else(|| {
+                Error::param("dump-pixels", &shown, "expected x,y (two integers)")
+            })?;
+            let coordinate = |c: &str, axis: &str| -> Result<u32> {
+                let c = c.trim();
+                if !c.is_empty() && c.bytes().all(|b| b.is_ascii_digit()) {
+                    c.parse().map_err(|_| {
+                        Error::param(
+                            "dump-pixels",
+                            &shown,
+                            format!("{axis} = {} is out of range (at most {})", shorten(c), u32::MAX),
+                        )
+                    })
+                } else {
+                    Err(Error::param(
+                        "dump-pixels",
+                        &shown,
+                        format!("{axis} must be a non-negative integer"),
+                    ))
+                }
+            };
+            Ok((coordinate(x, "x")?, coordinate(y, "y")?))
         })
         .collect()
 }
@@ -82,7 +101,15 @@ pub fn file_stem(spec: &EstimatorSpec) -> String {
     spec.to_string().replace([':', ','], "_")
 }
 
-pub fn run(args: &RenderArgs) -> Result<ExitCode> {
+pub fn run(args: &RenderArgs, memory: MemoryLimit) -> Result<ExitCode> {
+    if !(args.exposure.is_finite() && args.exposure > 0.0) {
+        return Err(Error::param(
+            "exposure",
+            args.exposure,
+            "must be finite and > 0",
+        ));
+    }
+    let threads = limits::threads(args.threads)?;
     let scene = mitsuba::load_file(&args.scene)?;
     let estimators = parse_estimator_list(&args.estimators)?;
     let cfg = FilmConfig {
@@ -94,10 +121,10 @@ pub fn run(args: &RenderArgs) -> Result<ExitCode> {
             Some(t) => parse_pixels(t)?,
             None => Vec::new(),
         },
+        memory,
     };
     // Fail on an unwritable output before spending the render.
     std::fs::create_dir_all(&args.out).map_err(|e| Error::io(args.out.display(), &e))?;
-    let threads = args.threads.unwrap_or(0);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()

@@ -4,6 +4,7 @@ use clap::Args;
 use fireflies::harness::runner::{self, Shard};
 use fireflies::harness::shards::ShardFile;
 use fireflies::harness::{self, Experiment, RunOptions, RunOutput};
+use fireflies::limits::MemoryLimit;
 use fireflies::{Result, report};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -31,7 +32,7 @@ pub struct RunArgs {
     shard: Option<String>,
 }
 
-pub fn run(args: &RunArgs) -> Result<ExitCode> {
+pub fn run(args: &RunArgs, memory: MemoryLimit) -> Result<ExitCode> {
     let exp = load(args.experiment.as_deref(), args.seed)?;
     let dir = args
         .out
@@ -44,6 +45,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         threads: args.threads,
         progress: std::io::stderr().is_terminal(),
         build: None,
+        memory,
     };
     eprintln!(
         "running {} ({} distributions x {} estimators, {} trials, n up to {})",

@@ -8,7 +8,7 @@ use rand_distr::Distribution;
 
 use super::special::unit_f64;
 use super::{Dist, TruncatedMoments};
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Num};
 
 /// `S = S_i` with probability `w_i`.
 ///
@@ -243,7 +243,7 @@ impl fmt::Display for Mixture {
             if i > 0 {
                 f.write_str(" + ")?;
             }
-            write!(f, "{w}*{d}")?;
+            write!(f, "{}*{d}", Num(*w))?;
         }
         f.write_str(")")
     }

@@ -8,7 +8,7 @@ use rand::Rng;
 use rand_distr::Distribution;
 
 use super::TruncatedMoments;
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Num};
 
 /// All probability at `value`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -90,7 +90,7 @@ impl PointMass {
 
 impl fmt::Display for PointMass {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "point(value={})", self.value)
+        write!(f, "point(value={})", Num(self.value))
     }
 }
 

@@ -23,6 +23,7 @@
 use crate::dist::{Dist, DistSpec};
 use crate::error::{Error, Result};
 use crate::estimators::EstimatorSpec;
+use crate::limits::shorten;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -139,15 +140,40 @@ pub struct Experiment {
     pub distributions: Vec<Distribution>,
 }
 
+/// A report directory name must be one plain path component, so that `name = "../x"` or
+/// `name = "/abs/x"` cannot write outside `reports/`.
+fn check_name(name: &str) -> Result<()> {
+    let mut parts = Path::new(name).components();
+    let plain = matches!(parts.next(), Some(std::path::Component::Normal(_)))
+        && parts.next().is_none()
+        && !name.contains(['/', '\\', '\0'])
+        && name.trim() == name;
+    if plain {
+        Ok(())
+    } else {
+        Err(Error::param(
+            "name",
+            format!("\"{}\"", shorten(name)),
+            "must be a plain file name (no path separators, no '..', not empty, no surrounding spaces): \
+             it names the report directory under reports/",
+        ))
+    }
+}
+
 impl Experiment {
     /// Parses and checks an experiment; `source` names it in errors, `default_name` is used
     /// when the file sets none.
     pub fn from_toml(text: &str, source: &str, default_name: &str) -> Result<Self> {
-        let file: ExperimentFile = toml::from_str(text).map_err(|e| Error::Io {
-            path: source.to_string(),
-            message: e.to_string().trim_end().to_string(),
-        })?;
-        Self::from_file(file, text, default_name)
+        let in_file = |message: String| Error::Experiment {
+            file: source.to_string(),
+            message,
+        };
+        let file: ExperimentFile =
+            toml::from_str(text).map_err(|e| in_file(e.to_string().trim_end().to_string()))?;
+        Self::from_file(file, text, source, default_name).map_err(|e| match e {
+            Error::Experiment { .. } => e,
+            e => in_file(e.to_string()),
+        })
     }
 
     /// Reads an experiment from disk.
@@ -168,7 +194,17 @@ impl Experiment {
         )
     }
 
-    fn from_file(file: ExperimentFile, text: &str, default_name: &str) -> Result<Self> {
+    fn from_file(
+        file: ExperimentFile,
+        text: &str,
+        source: &str,
+        default_name: &str,
+    ) -> Result<Self> {
+        // An entry's error names the file and the entry, e.g. `estimators[2] = "mon:M=0"`.
+        let at = |entry: String, what: &dyn std::fmt::Display| Error::Experiment {
+            file: source.to_string(),
+            message: format!("{entry}: {what}"),
+        };
         if file.trials < 4 {
             return Err(Error::param(
                 "trials",
@@ -230,11 +266,24 @@ impl Experiment {
                 ));
             }
         }
-        let estimators = file
-            .estimators
-            .iter()
-            .map(|s| s.parse::<EstimatorSpec>())
-            .collect::<Result<Vec<_>>>()?;
+        let entry = |list: &str, i: usize, text: &str, e: Error| {
+            at(format!("{list}[{i}] = \"{}\"", shorten(text)), &e)
+        };
+        let mut estimators: Vec<EstimatorSpec> = Vec::with_capacity(file.estimators.len());
+        for (i, text) in file.estimators.iter().enumerate() {
+            let spec: EstimatorSpec = text.parse().map_err(|e| entry("estimators", i, text, e))?;
+            spec.build().map_err(|e| entry("estimators", i, text, e))?;
+            if let Some(j) = estimators.iter().position(|s| *s == spec) {
+                return Err(at(
+                    format!("estimators[{i}] = \"{}\"", shorten(text)),
+                    &format!(
+                        "the same estimator as estimators[{j}] = \"{}\"; list each once",
+                        shorten(&file.estimators[j])
+                    ),
+                ));
+            }
+            estimators.push(spec);
+        }
         if estimators.is_empty() {
             return Err(Error::param(
                 "estimators",
@@ -242,11 +291,8 @@ impl Experiment {
                 "name at least one estimator",
             ));
         }
-        for spec in &estimators {
-            spec.build()?;
-        }
-        for r in &c.robust {
-            let spec: EstimatorSpec = r.parse()?;
+        for (i, r) in c.robust.iter().enumerate() {
+            let spec: EstimatorSpec = r.parse().map_err(|e| entry("checks.robust", i, r, e))?;
             if !estimators.contains(&spec) {
                 return Err(Error::param(
                     "checks.robust",
@@ -257,10 +303,10 @@ impl Experiment {
         }
         let mut distributions = Vec::with_capacity(file.distributions.len());
         for (i, entry) in file.distributions.iter().enumerate() {
-            let dist = entry.dist.build().map_err(|e| Error::Io {
-                path: format!("distributions[{i}]"),
-                message: e.to_string(),
-            })?;
+            let dist = entry
+                .dist
+                .build()
+                .map_err(|e| at(format!("distributions[{i}]"), &e))?;
             let label = match (&entry.label, &entry.dist) {
                 (Some(l), _) => l.clone(),
                 (None, DistSpec::Preset { name }) => name.clone(),
@@ -281,11 +327,13 @@ impl Experiment {
                 "name at least one distribution",
             ));
         }
+        let name = file
+            .name
+            .clone()
+            .unwrap_or_else(|| default_name.to_string());
+        check_name(&name)?;
         Ok(Experiment {
-            name: file
-                .name
-                .clone()
-                .unwrap_or_else(|| default_name.to_string()),
+            name,
             file,
             source_toml: text.to_string(),
             estimators,

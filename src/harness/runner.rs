@@ -13,6 +13,7 @@ use super::experiment::{Distribution, Experiment};
 use super::metrics::{CellAccumulator, Observation};
 use crate::error::{Error, Result};
 use crate::estimators::{Estimator, EstimatorSpec, Mean, validate_samples};
+use crate::limits::{self, MemoryLimit};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -46,6 +47,8 @@ pub struct RunOptions {
     /// Builds each estimator from its spec; `None` is [`EstimatorSpec::build`]. Tests use it to
     /// run a deliberately broken variant through the real harness.
     pub build: Option<BuildFn>,
+    /// The most memory the run may plan to hold.
+    pub memory: MemoryLimit,
 }
 
 /// How the runner turns a spec into an estimator.
@@ -237,10 +240,18 @@ fn trial_count(exp: &Experiment, opts: &RunOptions) -> Result<u64> {
 pub fn run_shard(exp: &Experiment, opts: &RunOptions, shard: Shard) -> Result<ShardOutput> {
     let trials = trial_count(exp, opts)?;
     let blocks = shard.blocks(trials.div_ceil(BLOCK_TRIALS));
+    let threads = limits::threads(opts.threads)?;
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.threads.unwrap_or(0))
+        .num_threads(threads)
         .build()
-        .map_err(|e| Error::param("threads", format!("{:?}", opts.threads), e.to_string()))?;
+        .map_err(|e| Error::param("threads", threads, e.to_string()))?;
+    check_memory(
+        exp,
+        trials,
+        blocks.end - blocks.start,
+        pool.current_num_threads(),
+        opts.memory,
+    )?;
     let shard_trials =
         (blocks.end * BLOCK_TRIALS).min(trials) - (blocks.start * BLOCK_TRIALS).min(trials);
     let bar = if opts.progress {
@@ -274,6 +285,47 @@ pub fn run_shard(exp: &Experiment, opts: &RunOptions, shard: Shard) -> Result<Sh
         wall_s: start.elapsed().as_secs_f64(),
         blocks: per_dist,
     })
+}
+
+/// Refuses a run that would hold more than the memory limit, before anything is allocated.
+/// A shard keeps every block's statistics until the fold (that fixed merge tree is what makes
+/// shards merge into the same bits), so memory grows with the trial count; each worker also
+/// holds one trial's samples up to the largest checkpoint and one of each estimator. The
+/// estimate is a lower bound: a histogram holds at least one bin per cell.
+fn check_memory(
+    exp: &Experiment,
+    trials: u64,
+    blocks: u64,
+    threads: usize,
+    memory: MemoryLimit,
+) -> Result<()> {
+    /// Smallest heap a non-empty `BTreeMap<i32, u64>` holds: one leaf of 11 entries.
+    const MIN_HISTOGRAM_BYTES: u128 = 11 * 12 + 16;
+    let estimators = exp.estimators.len() as u128;
+    let cells = estimators * exp.file.checkpoints.len() as u128;
+    let per_block = size_of::<BlockStats>() as u128
+        + cells * (size_of::<CellAccumulator>() as u128 + MIN_HISTOGRAM_BYTES)
+        + estimators * 24;
+    let held = u128::from(blocks) * exp.distributions.len() as u128 * per_block;
+    memory.check(
+        format!(
+            "trials = {trials} ({} distributions x {cells} estimator-checkpoint cells)",
+            exp.distributions.len()
+        ),
+        held,
+    )?;
+    let mut state = 0u128;
+    for spec in &exp.estimators {
+        state += spec.build()?.state_bytes() as u128;
+    }
+    let per_worker = exp.max_n() as u128 * 8 + cells * 8 + state;
+    memory.check(
+        format!(
+            "largest checkpoint = {} with {threads} worker threads",
+            exp.max_n()
+        ),
+        held + threads as u128 * per_worker,
+    )
 }
 
 /// Folds shards (every block exactly once, any order given) into the run's results, block by

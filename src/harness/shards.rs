@@ -4,6 +4,7 @@
 use super::experiment::Experiment;
 use super::runner::{self, RunOutput, ShardOutput};
 use crate::error::{Error, Result};
+use crate::limits::shorten;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -55,6 +56,19 @@ impl ShardFile {
     }
 }
 
+/// The first line (1-based) where two texts differ, and that line in each.
+fn first_difference<'a>(a: &'a str, b: &'a str) -> (usize, &'a str, &'a str) {
+    let (mut la, mut lb) = (a.lines(), b.lines());
+    for line in 1.. {
+        match (la.next(), lb.next()) {
+            (Some(x), Some(y)) if x == y => continue,
+            (None, None) => return (line, "", ""),
+            (x, y) => return (line, x.unwrap_or("(end of file)"), y.unwrap_or("(end of file)")),
+        }
+    }
+    unreachable!("the loop returns at the first difference")
+}
+
 /// Every `shard-*-of-*.json` in the given directories (or the files themselves), sorted.
 pub fn find_shard_files(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
@@ -99,6 +113,17 @@ pub fn merge(files: &[PathBuf]) -> Result<(Experiment, RunOutput)> {
         ),
     };
     let count = first.output.shard.count;
+    // Counts come from the files: check them against what was given before allocating.
+    if count == 0 || count > shards.len() as u64 {
+        return Err(Error::Io {
+            path: first_path.display().to_string(),
+            message: format!(
+                "shard {}/{count}: {} of {count} shard files given; every shard is needed",
+                first.output.shard.index,
+                shards.len()
+            ),
+        });
+    }
     let mut seen: Vec<Option<&PathBuf>> = vec![None; count as usize];
     for (path, s) in &shards {
         if s.format != first.format {
@@ -117,20 +142,29 @@ pub fn merge(files: &[PathBuf]) -> Result<(Experiment, RunOutput)> {
                 first.crate_version.clone(),
             ));
         }
-        if s.experiment_toml != first.experiment_toml {
+        if s.seed != first.seed {
             return Err(mismatch(
                 path,
-                "the experiment file",
-                format!("'{}'", s.experiment),
-                format!("a different '{}'", first.experiment),
+                "the seed",
+                s.seed.to_string(),
+                first.seed.to_string(),
             ));
         }
-        if s.seed != first.seed || s.output.trials != first.output.trials {
+        if s.output.trials != first.output.trials {
             return Err(mismatch(
                 path,
-                "seed/trials",
-                format!("{}/{}", s.seed, s.output.trials),
-                format!("{}/{}", first.seed, first.output.trials),
+                "the trial count",
+                s.output.trials.to_string(),
+                first.output.trials.to_string(),
+            ));
+        }
+        if s.experiment_toml != first.experiment_toml {
+            let (line, here, there) = first_difference(&s.experiment_toml, &first.experiment_toml);
+            return Err(mismatch(
+                path,
+                &format!("line {line} of experiment '{}'", shorten(&s.experiment)),
+                format!("`{}`", shorten(here)),
+                format!("`{}`", shorten(there)),
             ));
         }
         if s.output.shard.count != count {
@@ -141,7 +175,15 @@ pub fn merge(files: &[PathBuf]) -> Result<(Experiment, RunOutput)> {
                 count.to_string(),
             ));
         }
-        let slot = &mut seen[s.output.shard.index as usize];
+        let Some(slot) = usize::try_from(s.output.shard.index)
+            .ok()
+            .and_then(|i| seen.get_mut(i))
+        else {
+            return Err(Error::Io {
+                path: path.display().to_string(),
+                message: format!("shard index {} is not below its count {count}", s.output.shard.index),
+            });
+        };
         if let Some(other) = slot {
             return Err(Error::Io {
                 path: path.display().to_string(),

@@ -15,6 +15,7 @@ use super::world::World;
 use crate::error::{Error, Result};
 use crate::estimators::{EstimatorSpec, RgbEstimator, Welford, build_rgb, luminance};
 use crate::image::Image;
+use crate::limits::MemoryLimit;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -31,6 +32,8 @@ pub struct FilmConfig {
     pub seed: u64,
     /// Pixels `(x, y)` whose raw luminance streams are kept.
     pub dump_pixels: Vec<(u32, u32)>,
+    /// The most memory the render may plan to hold.
+    pub memory: MemoryLimit,
 }
 
 /// One estimator's image after a number of samples per pixel.
@@ -108,13 +111,49 @@ fn check(cfg: &FilmConfig, width: u32, height: u32) -> Result<Vec<u32>> {
     Ok(stops)
 }
 
+/// Refuses a render whose pixel banks, kept images and dumped streams would not fit in the
+/// memory limit, before anything is allocated. Each estimator is built once to read its real
+/// per-pixel state (its parameters are capped, so this is small).
+fn check_memory(cfg: &FilmConfig, width: u32, height: u32, stops: &[u32]) -> Result<usize> {
+    let pixels = u128::from(width) * u128::from(height);
+    let mut per_pixel = size_of::<Pixel>() as u128;
+    for spec in &cfg.estimators {
+        let e = build_rgb(spec)?;
+        per_pixel += (e.state_bytes() + size_of::<Box<dyn RgbEstimator>>()) as u128;
+    }
+    let kept = stops
+        .iter()
+        .filter(|&&s| cfg.checkpoints.contains(&s) || s == cfg.spp)
+        .count() as u128;
+    let images = kept * cfg.estimators.len() as u128 * size_of::<[f32; 3]>() as u128;
+    let dumps = cfg.dump_pixels.len() as u128 * u128::from(cfg.spp) * 8;
+    let needed = pixels * (per_pixel + images) + dumps;
+    let parameter = format!(
+        "film of {width}x{height} pixels with estimators {}",
+        cfg.estimators
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(",")
+    );
+    cfg.memory.check(parameter, needed)?;
+    usize::try_from(pixels).map_err(|_| {
+        Error::param(
+            "film",
+            format!("{width}x{height}"),
+            "has more pixels than this machine can address",
+        )
+    })
+}
+
 /// Renders `world` into the configured estimators. `on_pass(done_spp)` is called after each pass
 /// (for progress reporting).
 pub fn render(world: &World, cfg: &FilmConfig, mut on_pass: impl FnMut(u32)) -> Result<FilmOutput> {
     let (width, height) = (world.camera.width(), world.camera.height());
     let stops = check(cfg, width, height)?;
-    let mut pixels = Vec::with_capacity((width * height) as usize);
-    for _ in 0..width * height {
+    let pixel_count = check_memory(cfg, width, height, &stops)?;
+    let mut pixels = Vec::with_capacity(pixel_count);
+    for _ in 0..pixel_count {
         let estimators = cfg
             .estimators
             .iter()
@@ -125,7 +164,7 @@ pub fn render(world: &World, cfg: &FilmConfig, mut on_pass: impl FnMut(u32)) -> 
     let dump_index: Vec<usize> = cfg
         .dump_pixels
         .iter()
-        .map(|&(x, y)| (y * width + x) as usize)
+        .map(|&(x, y)| y as usize * width as usize + x as usize)
         .collect();
     let mut dumps: Vec<Vec<f64>> = vec![Vec::new(); dump_index.len()];
     let mut sigma = [Welford::new(), Welford::new(), Welford::new()];
@@ -203,7 +242,7 @@ pub fn render(world: &World, cfg: &FilmConfig, mut on_pass: impl FnMut(u32)) -> 
     Ok(FilmOutput {
         images,
         invalid_samples: invalid,
-        samples: u64::from(width) * u64::from(height) * u64::from(cfg.spp),
+        samples: (pixel_count as u64).saturating_mul(u64::from(cfg.spp)),
         state_bytes,
         dumps: cfg.dump_pixels.iter().copied().zip(dumps).collect(),
         estimate_seconds,

@@ -1,7 +1,7 @@
 //! Tables of a run: the tidy `results.csv` (one row per distribution, estimator, n and
 //! metric), the readable `summary.md`, and `manifest.json` with what produced them.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Num};
 use crate::harness::metrics::{CellMetrics, Interval};
 use crate::harness::{CheckResult, Experiment, RunOutput};
 use serde::Serialize;
@@ -213,11 +213,14 @@ pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> 
     for d in &out.dists {
         let var = d
             .variance
-            .map_or("infinite".to_string(), |v| format!("{v:.6}"));
+            .map_or("infinite".to_string(), |v| Num(v).to_string());
         let _ = writeln!(
             s,
             "## {}\n\n`{}`: mean {}, variance {}.\n",
-            d.label, d.law, d.mu, var
+            d.label,
+            d.law,
+            Num(d.mu),
+            var
         );
         let _ = writeln!(
             s,
