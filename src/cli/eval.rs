@@ -9,7 +9,7 @@ use fireflies::estimators::{Estimator, EstimatorSpec, Extras, Zirr, ZirrRef};
 use fireflies::{Error, Result, samples};
 use std::fs::File;
 use std::io::{self, BufReader, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Debug, Args)]
@@ -19,9 +19,11 @@ pub struct EvalArgs {
     estimators: Vec<String>,
     /// Nine files (row-major 3x3 block) for Zirr's neighbourhood variants; the centre is the
     /// fifth, an empty file is a pixel outside the image. Other estimators see the centre only.
+    /// Every file is read once, even when it fills several slots (`-`, stdin, included).
     #[arg(long, num_args = 9, value_name = "FILE", conflicts_with = "file")]
     block: Option<Vec<PathBuf>>,
     /// Sample file: decimal numbers separated by whitespace or newlines; `-` or none = stdin.
+    /// UTF-8 text (a leading byte-order mark is skipped), tokens of at most 1024 bytes.
     file: Option<PathBuf>,
 }
 
@@ -46,27 +48,120 @@ fn parse_specs(texts: &[String]) -> Result<Vec<EstimatorSpec>> {
     texts.iter().map(|t| t.parse()).collect()
 }
 
-/// Streams a file (or stdin for `-` or no file) block by block; returns the sample count.
-fn stream(path: Option<&PathBuf>, mut on_block: impl FnMut(&[f64])) -> Result<u64> {
-    let push = |block: &[f64]| {
-        on_block(block);
-        Ok(())
-    };
-    match path {
-        Some(p) if p.as_os_str() != "-" => {
-            let name = p.display().to_string();
-            let file = File::open(p).map_err(|e| Error::io(&name, &e))?;
-            samples::for_each_block(&name, BufReader::new(file), push)
+/// Where samples come from: standard input (`-` or no file) or a named file.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Input<'a> {
+    Stdin,
+    File(&'a Path),
+}
+
+impl<'a> Input<'a> {
+    fn new(path: Option<&'a PathBuf>) -> Self {
+        match path {
+            Some(p) if p.as_os_str() != "-" => Input::File(p),
+            _ => Input::Stdin,
         }
-        _ => samples::for_each_block("-", io::stdin().lock(), push),
     }
+
+    /// The name in messages, control characters escaped.
+    fn name(self) -> String {
+        match self {
+            Input::Stdin => "-".to_string(),
+            Input::File(p) => samples::visible(&p.display().to_string()),
+        }
+    }
+
+    /// Streams the input once, block by block; returns the sample count.
+    fn stream(self, mut on_block: impl FnMut(&[f64])) -> Result<u64> {
+        let name = self.name();
+        let push = |block: &[f64]| {
+            on_block(block);
+            Ok(())
+        };
+        match self {
+            Input::File(p) => {
+                let file = File::open(p).map_err(|e| Error::io(&name, &e))?;
+                samples::for_each_block(&name, BufReader::new(file), push)
+            }
+            Input::Stdin => samples::for_each_block(&name, io::stdin().lock(), push),
+        }
+    }
+}
+
+/// What one `--estimator` reads: the centre slot only, or (Zirr's block estimates) every slot.
+enum Job {
+    Centre(Box<dyn Estimator>),
+    Zirr(Vec<Zirr>),
+    ZirrRef(Vec<ZirrRef>),
+}
+
+impl Job {
+    /// The job of `spec` over `slots` slots; Zirr's estimators read every slot in block mode.
+    fn new(spec: &EstimatorSpec, slots: usize, block_mode: bool) -> Result<Job> {
+        Ok(match *spec {
+            EstimatorSpec::Zirr(p) if block_mode => {
+                Job::Zirr((0..slots).map(|_| Zirr::new(p)).collect::<Result<_>>()?)
+            }
+            EstimatorSpec::ZirrRef(p) if block_mode => {
+                Job::ZirrRef((0..slots).map(|_| ZirrRef::new(p)).collect::<Result<_>>()?)
+            }
+            _ => Job::Centre(spec.build()?),
+        })
+    }
+
+    /// Feeds a block of the input named by the slots `at`.
+    fn push(&mut self, at: &[usize], centre: usize, block: &[f64]) {
+        match self {
+            Job::Centre(e) => {
+                if at.contains(&centre) {
+                    e.push_slice(block);
+                }
+            }
+            Job::Zirr(pixels) => at.iter().for_each(|&i| pixels[i].push_slice(block)),
+            Job::ZirrRef(pixels) => at.iter().for_each(|&i| pixels[i].push_slice(block)),
+        }
+    }
+
+    /// The JSON line; `counts` holds each slot's sample count (0: a pixel outside the image).
+    fn line(&self, text: &str, counts: &[u64], centre: usize) -> Result<String> {
+        match self {
+            Job::Centre(e) => Ok(json_line(text, e.count(), e.estimate()?, &e.extras())),
+            Job::Zirr(pixels) => block_line(text, pixels, counts, centre, Zirr::block_estimate),
+            Job::ZirrRef(pixels) => {
+                block_line(text, pixels, counts, centre, ZirrRef::block_estimate)
+            }
+        }
+    }
+}
+
+/// The block estimate of a neighbourhood-capable estimator over nine pixels.
+type BlockFn<T> = fn(&[Option<&T>; 9]) -> Result<(f64, Extras)>;
+
+fn block_line<T: Estimator>(
+    text: &str,
+    pixels: &[T],
+    counts: &[u64],
+    centre: usize,
+    block_estimate: BlockFn<T>,
+) -> Result<String> {
+    let block: [Option<&T>; 9] = std::array::from_fn(|i| (counts[i] > 0).then(|| &pixels[i]));
+    let (estimate, extras) = block_estimate(&block)?;
+    Ok(json_line(text, pixels[centre].count(), estimate, &extras))
 }
 
 pub fn run(args: &EvalArgs) -> Result<ExitCode> {
     let specs = parse_specs(&args.estimators)?;
     let lines = match &args.block {
-        None => eval_stream(args.file.as_ref(), &args.estimators, &specs)?,
-        Some(files) => eval_block(files, &args.estimators, &specs)?,
+        None => eval(
+            &[Input::new(args.file.as_ref())],
+            0,
+            &args.estimators,
+            &specs,
+        )?,
+        Some(files) => {
+            let slots: Vec<Input> = files.iter().map(|f| Input::new(Some(f))).collect();
+            eval(&slots, 4, &args.estimators, &specs)?
+        }
     };
     let mut out = io::stdout().lock();
     for line in lines {
@@ -75,82 +170,42 @@ pub fn run(args: &EvalArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn eval_stream(
-    file: Option<&PathBuf>,
+/// Evaluates every spec over `slots` (one input, or nine in block mode with the centre at
+/// `centre`). Each distinct input is read exactly once, in order of first appearance, and each
+/// block of it is fed to every estimator of every slot naming it; so repeated specs give
+/// identical lines, and standard input may fill several slots.
+fn eval(
+    slots: &[Input],
+    centre: usize,
     texts: &[String],
     specs: &[EstimatorSpec],
 ) -> Result<Vec<String>> {
-    let mut estimators = specs
+    let block_mode = slots.len() > 1;
+    let mut jobs = specs
         .iter()
-        .map(EstimatorSpec::build)
+        .map(|spec| Job::new(spec, slots.len(), block_mode))
         .collect::<Result<Vec<_>>>()?;
-    let n = stream(file, |block| {
-        estimators.iter_mut().for_each(|e| e.push_slice(block));
-    })?;
-    if n == 0 {
-        let name = file.map_or("-".to_string(), |p| p.display().to_string());
-        return Err(Error::EmptyStream(format!("input {name}")));
+    let mut distinct: Vec<(Input, Vec<usize>)> = Vec::new();
+    for (i, &input) in slots.iter().enumerate() {
+        match distinct.iter_mut().find(|(seen, _)| *seen == input) {
+            Some((_, at)) => at.push(i),
+            None => distinct.push((input, vec![i])),
+        }
     }
-    estimators
-        .iter()
-        .zip(texts)
-        .map(|(e, text)| Ok(json_line(text, e.count(), e.estimate()?, &e.extras())))
-        .collect()
-}
-
-/// Streams one named file into an estimator; returns the sample count.
-fn read_into<T: Estimator + ?Sized>(estimator: &mut T, path: &PathBuf) -> Result<u64> {
-    stream(Some(path), |block| estimator.push_slice(block))
-}
-
-/// The block estimate of a neighbourhood-capable estimator over nine files.
-type BlockFn<T> = fn(&[Option<&T>; 9]) -> Result<(f64, Extras)>;
-
-fn block_line<T: Estimator>(
-    text: &str,
-    files: &[PathBuf],
-    build: impl Fn() -> Result<T>,
-    block_estimate: BlockFn<T>,
-) -> Result<String> {
-    let mut pixels = Vec::with_capacity(9);
-    for f in files {
-        let mut e = build()?;
-        let n = read_into(&mut e, f)?;
-        pixels.push((n > 0).then_some(e));
+    let mut counts = vec![0u64; slots.len()];
+    for (input, at) in &distinct {
+        let n = input.stream(|block| {
+            jobs.iter_mut().for_each(|job| job.push(at, centre, block));
+        })?;
+        at.iter().for_each(|&i| counts[i] = n);
     }
-    let Some(centre) = &pixels[4] else {
-        return Err(Error::EmptyStream(format!(
-            "centre pixel {}",
-            files[4].display()
-        )));
-    };
-    let block: [Option<&T>; 9] = std::array::from_fn(|i| pixels[i].as_ref());
-    let (estimate, extras) = block_estimate(&block)?;
-    Ok(json_line(text, centre.count(), estimate, &extras))
-}
-
-fn eval_block(files: &[PathBuf], texts: &[String], specs: &[EstimatorSpec]) -> Result<Vec<String>> {
-    let centre = &files[4];
-    specs
-        .iter()
+    if counts[centre] == 0 {
+        let what = if block_mode { "centre pixel" } else { "input" };
+        let name = slots[centre].name();
+        return Err(Error::EmptyStream(format!("{what} {name}")));
+    }
+    jobs.iter()
         .zip(texts)
-        .map(|(spec, text)| match *spec {
-            EstimatorSpec::Zirr(p) => {
-                block_line(text, files, || Zirr::new(p), Zirr::block_estimate)
-            }
-            EstimatorSpec::ZirrRef(p) => {
-                block_line(text, files, || ZirrRef::new(p), ZirrRef::block_estimate)
-            }
-            _ => {
-                let mut e = spec.build()?;
-                if read_into(&mut *e, centre)? == 0 {
-                    return Err(Error::EmptyStream(format!(
-                        "centre pixel {}",
-                        centre.display()
-                    )));
-                }
-                Ok(json_line(text, e.count(), e.estimate()?, &e.extras()))
-            }
-        })
+        .map(|(job, text)| job.line(text, &counts, centre))
         .collect()
 }
