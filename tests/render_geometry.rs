@@ -436,6 +436,96 @@ fn disk_hits_in_object_space_with_inverse_transpose_normal() {
     assert!((h.ng.length() - 1.0).abs() < 1e-6);
 }
 
+/// A triangle reaching `s` from the origin in the plane `y = 0`, facing `+y`, containing the
+/// origin.
+fn ground(s: f32) -> GeometryDesc {
+    mesh(
+        vec![
+            Vec3::new(-s, 0.0, s),
+            Vec3::new(s, 0.0, s),
+            Vec3::new(0.0, 0.0, -s),
+        ],
+        vec![[0, 1, 2]],
+    )
+}
+
+/// Issue 10: a triangle with coordinates of 1e10 was dropped as degenerate (the squared length
+/// of its cross product overflowed f32), so it was invisible. Up to the loader's coordinate
+/// limit (1e18) a huge ground plane is now hit where the ray meets it, looking down, obliquely
+/// and at a grazing angle (where the watertight test's `t`, a weighted sum of the vertices'
+/// distances, errs by ulps of 1e10), and its area is sampled. Before the fix: no primitive.
+#[test]
+fn huge_triangles_are_hit_where_the_ray_meets_them() {
+    let rays = [
+        (Vec3::new(0.3, 2.0, -0.7), -Vec3::Y),
+        (
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(-1.0, -2.0, 0.5).normalize(),
+        ),
+        (
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.0, -0.01, 1.0).normalize(),
+        ),
+        (
+            Vec3::new(-3.0, 0.5, 2.0),
+            Vec3::new(0.7, -0.05, -0.7).normalize(),
+        ),
+    ];
+    for s in [1e5f32, 1e10, 1e15, 1e18] {
+        let g = ground(s);
+        let prims = primitives(3, &g);
+        assert_eq!(prims.len(), 1, "s = {s:e}: the triangle was dropped");
+        let bvh = Bvh::build(prims);
+        for (o, d) in rays {
+            let h = bvh
+                .intersect(&Ray::new(o, d), 0.0, f32::INFINITY)
+                .unwrap_or_else(|| panic!("s = {s:e}: ray from {o} along {d} misses"));
+            let t_exact = -f64::from(o.y) / f64::from(d.y);
+            assert_rel(f64::from(h.t), t_exact, 1e-6);
+            let p_exact = o.as_dvec3() + d.as_dvec3() * t_exact;
+            let err = (h.p.as_dvec3() - p_exact).abs().max_element();
+            assert!(
+                err <= 1e-6 * (1.0 + t_exact),
+                "s = {s:e}: point {} off by {err}",
+                h.p
+            );
+            assert_eq!((h.ng, h.ns, h.shape), (Vec3::Y, Vec3::Y, 3));
+            // And from below, the same plane with its front normal.
+            let below = Ray::new(o * Vec3::new(1.0, -1.0, 1.0), d * Vec3::new(1.0, -1.0, 1.0));
+            let h = bvh
+                .intersect(&below, 0.0, f32::INFINITY)
+                .expect("hit from below");
+            assert_rel(f64::from(h.t), t_exact, 1e-6);
+            assert_eq!(h.ng, Vec3::Y);
+        }
+        let sampler = ShapeSampler::new(&g);
+        assert_rel(f64::from(sampler.area()), 2.0 * f64::from(s).powi(2), 1e-6);
+        let from = Vec3::new(0.0, 1.0, 0.0);
+        let sample = sampler
+            .sample_direction(from, Vec2::new(0.3, 0.6))
+            .expect("a sample");
+        assert_eq!((sample.p.y, sample.n), (0.0, Vec3::Y));
+        assert!(sample.pdf.is_finite() && sample.pdf > 0.0, "{sample:?}");
+    }
+}
+
+/// Triangles too small for the plain cross product (its squared length underflows below edges
+/// of about 1e-10) are kept and hit as well.
+#[test]
+fn tiny_triangles_are_hit() {
+    let s = 1e-12f32;
+    let prims = primitives(0, &ground(s));
+    assert_eq!(prims.len(), 1);
+    let h = prims[0]
+        .intersect(
+            &Ray::new(Vec3::new(0.0, 1.0, 0.0), -Vec3::Y),
+            0.0,
+            f32::INFINITY,
+        )
+        .expect("hit");
+    assert_eq!((h.t, h.ng), (1.0, Vec3::Y));
+}
+
 #[test]
 fn degenerate_geometry_yields_nothing_and_samples_nothing() {
     let flat = mesh(

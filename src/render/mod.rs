@@ -3,7 +3,7 @@
 //! Layers, top to bottom: [`film`] (per-pixel estimator banks) and [`integrator`] (unidirectional
 //! path tracing with next-event estimation and MIS) over [`world`] (the built scene: [`bvh`],
 //! [`shapes`], [`light`], [`camera`], [`bsdf`]) over [`scene`] (plain description, produced by
-//! [`mitsuba`] from XML) and [`sampling`] (warps and frames).
+//! [`mitsuba`] from XML, with [`obj`] reading meshes) and [`sampling`] (warps and frames).
 
 pub mod bsdf;
 pub mod bvh;
@@ -12,6 +12,7 @@ pub mod film;
 pub mod integrator;
 pub mod light;
 pub mod mitsuba;
+pub mod obj;
 pub mod sampler;
 pub mod sampling;
 pub mod scene;

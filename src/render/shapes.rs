@@ -184,14 +184,27 @@ pub fn primitives(shape: u32, g: &GeometryDesc) -> Vec<Primitive> {
     }
 }
 
+/// The unit normal of the triangle `p` (along `(p1 − p0) × (p2 − p0)`), or `None` when it is
+/// degenerate or not finite.
+///
+/// The edges are divided by their largest component first: the plain cross product's squared
+/// length overflows f32 once edges pass about 1e9, and underflows below about 1e-10, and either
+/// made a valid triangle count as degenerate (a 1e10 ground plane silently vanished).
+pub fn triangle_normal(p: &[Vec3; 3]) -> Option<Vec3> {
+    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+    let scale = e1.abs().max_element().max(e2.abs().max_element());
+    if !(scale > 0.0 && scale.is_finite()) {
+        return None;
+    }
+    (e1 / scale).cross(e2 / scale).try_normalize()
+}
+
 /// The mesh's valid triangles: indices in range, finite, of non-zero area.
 fn mesh_triangles(m: &MeshDesc) -> impl Iterator<Item = ([u32; 3], [Vec3; 3])> + '_ {
     m.indices.iter().filter_map(|&idx| {
         let get = |i: u32| m.positions.get(i as usize).copied();
         let p = [get(idx[0])?, get(idx[1])?, get(idx[2])?];
-        let c = (p[1] - p[0]).cross(p[2] - p[0]);
-        let len2 = c.length_squared();
-        (len2 > 0.0 && len2.is_finite() && p.iter().all(|v| v.is_finite())).then_some((idx, p))
+        (p.iter().all(|v| v.is_finite()) && triangle_normal(&p).is_some()).then_some((idx, p))
     })
 }
 
@@ -280,8 +293,23 @@ impl Primitive {
                 let det = h.a + h.b + h.c;
                 let inv = 1.0 / det;
                 let (b0, b1, b2) = (h.a * inv, h.b * inv, h.c * inv);
-                let pos = p[0] * b0 + p[1] * b1 + p[2] * b2;
-                let ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
+                let mut t = h.t;
+                let mut pos = p[0] * b0 + p[1] * b1 + p[2] * b2;
+                // Interpolation errs by a few ulps of the vertices, not of the hit: on a
+                // triangle much larger than the distance of the hit from the origin (a 1e10
+                // ground plane seen from near the origin) that is far off. Intersect its plane
+                // in f64 there instead.
+                let span = p[0].abs().max(p[1].abs()).max(p[2].abs()).max_element();
+                if span > REFINE_SPAN * (1.0 + pos.abs().max_element()) {
+                    if let Some((t64, pos64)) = plane_hit(p, ray) {
+                        (t, pos) = (t64, pos64);
+                    }
+                }
+                let ng = (p[1] - p[0])
+                    .cross(p[2] - p[0])
+                    .try_normalize()
+                    .or_else(|| triangle_normal(p))
+                    .unwrap_or(Vec3::Z);
                 let ns = match n {
                     Some(n) => match (n[0] * b0 + n[1] * b1 + n[2] * b2).try_normalize() {
                         Some(s) if s.dot(ng) < 0.0 => -s,
@@ -291,7 +319,7 @@ impl Primitive {
                     None => ng,
                 };
                 Hit {
-                    t: h.t,
+                    t,
                     p: pos,
                     ng,
                     ns,
@@ -334,6 +362,34 @@ impl Primitive {
     }
 }
 
+/// How much larger than a triangle hit's own values (its `t`, its coordinates) the vertices'
+/// may be before the hit is recomputed from the triangle's plane in f64. The watertight test's
+/// `t` and the interpolated point are weighted sums of the vertices, so they err by ulps of the
+/// vertices: on a huge triangle met near its middle (a 1e10 ground plane seen from near the
+/// origin) by far more than the values themselves. Past this ratio the error would exceed
+/// about 64 ulps (4e-6 relative; the spawn offset is 1e-4 relative). Almost every hit stays on
+/// the f32 path: the Cornell box renders bit for bit as before; a ray that meets a wall at a
+/// distance below 1/64 of the wall's extent takes the f64 path.
+const REFINE_SPAN: f32 = 64.0;
+
+/// The parameter at which the ray `o + t·d` meets the plane of triangle `p`, computed in f64
+/// from the f32 inputs, or `None` if the ray is parallel to it.
+fn plane_t(p: &[Vec3; 3], o: Vec3, d: Vec3) -> Option<f64> {
+    let [a, b, c] = p.map(Vec3::as_dvec3);
+    let n = (b - a).cross(c - a);
+    let t = n.dot(a - o.as_dvec3()) / n.dot(d.as_dvec3());
+    t.is_finite().then_some(t)
+}
+
+/// [`plane_t`] and the point there, rounded to f32.
+fn plane_hit(p: &[Vec3; 3], ray: &Ray) -> Option<(f32, Vec3)> {
+    let t = plane_t(p, ray.o, ray.d)?;
+    Some((
+        t as f32,
+        (ray.o.as_dvec3() + ray.d.as_dvec3() * t).as_vec3(),
+    ))
+}
+
 /// A bounds margin for shapes whose test is not the box's own arithmetic.
 #[inline]
 fn pad(center: Vec3, extent: f32) -> Vec3 {
@@ -374,7 +430,30 @@ fn intersect_triangle(p: &[Vec3; 3], r: &RayPre, tmin: f32, tmax: f32) -> Option
         return None;
     }
     let big_t = u * (r.sz * a[kz]) + v * (r.sz * b[kz]) + w * (r.sz * c[kz]);
-    let t = big_t / det;
+    let mut t = if big_t.is_finite() {
+        big_t / det
+    } else {
+        // Products of three coordinates overflow past about 1e12: weigh by the normalised
+        // barycentrics instead (all of one sign here, so each lies in [0, 1]).
+        let inv = 1.0 / det;
+        (u * inv) * (r.sz * a[kz]) + (v * inv) * (r.sz * b[kz]) + (w * inv) * (r.sz * c[kz])
+    };
+    // `t` weighs the vertices' distances along the ray: when they dwarf it (a huge triangle
+    // met at a grazing angle), its rounding error does too, and the hit could even land behind
+    // the ray. Recompute from the plane then; only hits inside the edges get here.
+    let reach = (r.sz * a[kz])
+        .abs()
+        .max((r.sz * b[kz]).abs())
+        .max((r.sz * c[kz]).abs());
+    if reach > REFINE_SPAN * t.abs() {
+        // Outside the interval beyond doubt, no need to refine: that is the common case, a
+        // spawned ray's own triangle just behind its origin, at every bounce.
+        let doubt = 8.0 * f32::EPSILON * reach;
+        if t + doubt <= tmin || t - doubt >= tmax {
+            return None;
+        }
+        t = plane_t(p, r.o, r.d)? as f32;
+    }
     if t > tmin && t < tmax {
         Some(RawHit {
             t,
@@ -534,12 +613,19 @@ impl ShapeSampler {
                 for (_, p) in mesh_triangles(m) {
                     let c = (p[1] - p[0]).cross(p[2] - p[0]);
                     let len = c.length();
-                    if !(len > 0.0) || !len.is_finite() {
-                        continue;
-                    }
-                    sum += 0.5 * len as f64;
+                    let (len, n) = if len > 0.0 && len.is_finite() {
+                        (f64::from(len), c / len)
+                    } else {
+                        // Too large or small for the f32 length: area in f64, scale-safe normal.
+                        let c64 = (p[1] - p[0]).as_dvec3().cross((p[2] - p[0]).as_dvec3());
+                        match triangle_normal(&p) {
+                            Some(n) if c64.length() > 0.0 => (c64.length(), n),
+                            _ => continue,
+                        }
+                    };
+                    sum += 0.5 * len;
                     tris.push(p);
-                    normals.push(c / len);
+                    normals.push(n);
                     cdf.push(sum as f32);
                 }
                 let area = sum as f32;
