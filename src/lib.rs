@@ -6,7 +6,7 @@
 //!
 //! Layers (arrows point down): the command line -> [`report`] / [`harness`] -> [`dist`] ->
 //! [`estimators`] -> [`error`].
-//! The estimator contract, with worked examples, is `spec/estimators.md`.
+//! The estimator contract, with worked examples, is `docs/estimators.md`.
 
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]

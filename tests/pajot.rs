@@ -1,4 +1,4 @@
-//! Pajot et al.'s outlier delaying (spec §6): the worked example, every decision of the module
+//! Pajot et al.'s outlier delaying (docs/estimators.md §6): the worked example, every decision of the module
 //! doc, properties checked against a literal (slow) re-reading of the spec, hard inputs, and the
 //! delayed fractions and state sizes on the presets.
 //!
@@ -1006,7 +1006,7 @@ fn state_size_per_preset() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// A literal, slow re-reading of spec §6, used as an oracle
+// A literal, slow re-reading of docs/estimators.md §6, used as an oracle
 // ---------------------------------------------------------------------------------------------
 
 #[derive(Debug, Clone, Copy)]

@@ -2,7 +2,7 @@
 //! the Bank: invariants the spec states or implies, checked on random streams of finite,
 //! non-negative samples spanning 20 decades, with zeros, negative zeros, ties and outliers.
 //!
-//! Several properties compare with `oracle`, an independent transcription of spec §1–§4 written
+//! Several properties compare with `oracle`, an independent transcription of docs/estimators.md §1–§4 written
 //! for these tests (no code of the crate): since the spec fixes every operation order, the
 //! crate must agree with it bit for bit.
 
@@ -23,9 +23,9 @@ fn config() -> Config {
     }
 }
 
-/// An independent transcription of spec §1–§4, used as the oracle.
+/// An independent transcription of docs/estimators.md §1–§4, used as the oracle.
 mod oracle {
-    /// Spec §1 Neumaier sum, in the spec's words.
+    /// docs/estimators.md §1 Neumaier sum, in the spec's words.
     pub fn neumaier(xs: impl IntoIterator<Item = f64>) -> f64 {
         let (mut s, mut c) = (0.0f64, 0.0f64);
         for x in xs {
@@ -48,7 +48,7 @@ mod oracle {
         neumaier(xs.iter().map(|&x| x.min(c))) / xs.len() as f64
     }
 
-    /// The K = min(n, M) non-empty set means, ascending (spec §3 "Partition").
+    /// The K = min(n, M) non-empty set means, ascending (docs/estimators.md §3 "Partition").
     pub fn theta(xs: &[f64], m: usize) -> Vec<f64> {
         let mut t: Vec<f64> = (0..m.min(xs.len()))
             .map(|set| {
@@ -112,7 +112,7 @@ mod oracle {
         }
     }
 
-    /// Spec §1 Welford population sigma.
+    /// docs/estimators.md §1 Welford population sigma.
     pub fn sigma(xs: &[f64]) -> f64 {
         let (mut k, mut mean, mut m2) = (0.0f64, 0.0f64, 0.0f64);
         for &x in xs {
@@ -124,7 +124,7 @@ mod oracle {
         (m2 / k).sqrt()
     }
 
-    /// Spec §4: q is the largest integer with 2^q <= ratio, found by doubling (exact).
+    /// docs/estimators.md §4: q is the largest integer with 2^q <= ratio, found by doubling (exact).
     pub fn jung_m(xs: &[f64], sigma_image: f64, m_max: usize) -> usize {
         let ratio = sigma(xs) / sigma_image;
         if ratio < 1.0 {

@@ -498,7 +498,7 @@ fn a_coloured_firefly_is_excluded_from_all_three_channels() {
 
 #[test]
 fn zirr_reweights_a_coloured_firefly_in_all_channels() {
-    // 99 samples of (1, 1, 1) and a lone blue firefly: the cascade rejects it (spec §5
+    // 99 samples of (1, 1, 1) and a lone blue firefly: the cascade rejects it (docs/estimators.md §5
     // consequence (i) with J = auto) and its colour goes with it.
     let mut px = vec![[1.0, 1.0, 1.0]; 99];
     px.push([0.0, 0.0, 4e4 / 0.0722]);
@@ -581,7 +581,7 @@ fn zirr_params(s: &str) -> fireflies::estimators::ZirrParams {
 
 #[test]
 fn zirr_block_reproduces_the_spec_example_on_grey() {
-    // Spec §5: centre the running example, eight neighbours of seven 1.0 samples.
+    // docs/estimators.md §5: centre the running example, eight neighbours of seven 1.0 samples.
     let centre: Vec<[f64; 3]> = RUNNING.iter().map(|&v| [v, v, v]).collect();
     for s in ["zirr", "zirr:J=6"] {
         let c = zirr_rgb(s, &centre);
@@ -772,7 +772,7 @@ fn a_single_sample() {
         assert_eq!(e.count(), 1);
         let got = e.estimate().unwrap();
         if s.starts_with("pajot") {
-            // No extended mode: the lone sample is delayed (spec §6.1).
+            // No extended mode: the lone sample is delayed (docs/estimators.md §6.1).
             assert_eq!(got, [0.0; 3], "{s}");
         } else if s.starts_with("gini") {
             assert_eq!(got, [0.0; 3], "{s}");

@@ -1,4 +1,4 @@
-//! Every worked example of `spec/estimators.md` §1–§4 reproduced to 1e-12 relative, through
+//! Every worked example of `docs/estimators.md` §1–§4 reproduced to 1e-12 relative, through
 //! every way a sample stream can reach an estimator (one by one, uneven blocks, a Bank), plus
 //! the spec-string grammar of §1a for these estimators.
 //!
@@ -224,7 +224,7 @@ fn gmonb_reports_its_decision() {
 
 #[test]
 fn m3_gmon_is_the_mean_of_set_means() {
-    // Spec §3 note: with M = 3, c = 0 for every G < 1, so G-MoN(3) is the mean of the three
+    // docs/estimators.md §3 note: with M = 3, c = 0 for every G < 1, so G-MoN(3) is the mean of the three
     // set means (2.3 + 3.15 + 175)/3, not the sample mean.
     let g = estimate_all_routes("gmon:M=3", &S);
     assert_rel(g, (2.3 + 3.15 + 175.0) / 3.0, REL);

@@ -1,4 +1,4 @@
-//! Zirr et al.'s cascade reweighting (spec §5 `zirr`, §5a `zirr-ref`): the spec's worked
+//! Zirr et al.'s cascade reweighting (docs/estimators.md §5 `zirr`, §5a `zirr-ref`): the spec's worked
 //! examples reproduced to 1e-12, hand-computed 3×3 neighbourhoods, hard inputs, error messages,
 //! a literal transcription of the spec as an independent oracle (bit-for-bit), and property
 //! tests of the invariants.
@@ -8,16 +8,16 @@ use fireflies::estimators::{
 };
 use proptest::prelude::*;
 
-/// Spec §1 running example.
+/// docs/estimators.md §1 running example.
 const RUNNING: [f64; 7] = [0.6, 1.5, 0.0, 2.2, 4.8, 350.0, 4.1];
-/// Spec §5 example estimate (b = 8, J = 6 or auto, κ = κ_min = u = 1).
+/// docs/estimators.md §5 example estimate (b = 8, J = 6 or auto, κ = κ_min = u = 1).
 const PAPER_ESTIMATE: f64 = 5.191836734693878;
-/// Spec §5a example estimate.
+/// docs/estimators.md §5a example estimate.
 const REF_ESTIMATE: f64 = 5.616560523284569;
-/// Spec §5 3×3 example estimate, 13.2/7.
+/// docs/estimators.md §5 3×3 example estimate, 13.2/7.
 const BLOCK_ESTIMATE: f64 = 1.8857142857142857;
 
-// Exact buffers of the running example (spec §5), in units of A_j = N·B_j:
+// Exact buffers of the running example (docs/estimators.md §5), in units of A_j = N·B_j:
 // 0.6, 0 -> A_0; 1.5 -> 13/14 + 4/7; 2.2 -> 29/35 + 48/35; 4.8 -> 16/35 + 152/35;
 // 4.1 -> 39/70 + 124/35; 350 -> 162/7 (buffer 2) + 2288/7 (buffer 3).
 const A0: f64 = 236.0 / 70.0;
@@ -105,7 +105,7 @@ fn err_ref(p: ZirrParams) -> String {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Spec §5 and §5a worked examples.
+// docs/estimators.md §5 and §5a worked examples.
 
 #[test]
 fn spec_5_example_fixed_cascade() {
@@ -118,7 +118,7 @@ fn spec_5_example_fixed_cascade() {
     let b = floats(&e, "B");
     let want_b: Vec<f64> = [A0, A1, A2, A3, 0.0, 0.0].iter().map(|a| a / 7.0).collect();
     assert_all_rel(&b, &want_b, 1e-12);
-    // The printed values of spec §5.
+    // The printed values of docs/estimators.md §5.
     let a: Vec<f64> = b.iter().map(|b| b * 7.0).collect();
     for (x, w) in a
         .iter()
@@ -197,7 +197,7 @@ fn spec_5_three_by_three_example() {
             0.0,
         ];
         assert_all_rel(&rho, &want[..len], 1e-12);
-        // Printed values of spec §5.
+        // Printed values of docs/estimators.md §5.
         for (r, w) in rho.iter().zip([6.733, 6.774, 0.248, 0.111, 0.071, 0.0]) {
             assert!((r - w).abs() < 5e-4, "rho = {rho:?}");
         }
@@ -959,7 +959,7 @@ proptest! {
         }
     }
 
-    /// The implementation equals the literal transcription of spec §5 bit for bit
+    /// The implementation equals the literal transcription of docs/estimators.md §5 bit for bit
     /// (an auto cascade equals a fixed one of J_used buffers).
     #[test]
     fn zirr_matches_the_literal_spec(p in zirr_params(), xs in samples()) {
@@ -973,7 +973,7 @@ proptest! {
         prop_assert_eq!(z.estimate().unwrap(), lit.estimate);
     }
 
-    /// Same for zirr-ref (spec §5a).
+    /// Same for zirr-ref (docs/estimators.md §5a).
     #[test]
     fn zirr_ref_matches_the_literal_spec(p in ref_params(), xs in samples()) {
         let CascadeSize::Fixed(j) = p.j else { unreachable!() };
@@ -987,7 +987,7 @@ proptest! {
         prop_assert_eq!(float(&e, "discarded"), lit.discarded);
     }
 
-    /// Spec §5 invariant: Σ B_j is the mean; for zirr-ref Σ B_j + discarded is.
+    /// docs/estimators.md §5 invariant: Σ B_j is the mean; for zirr-ref Σ B_j + discarded is.
     #[test]
     fn buffers_sum_to_the_mean(p in zirr_params(), r in ref_params(), xs in samples()) {
         let mean = neumaier_mean(&xs);

@@ -209,7 +209,7 @@ impl Experiment {
             return Err(Error::param(
                 "trials",
                 file.trials,
-                "must be at least 4 (spec §7)",
+                "must be at least 4 (docs/estimators.md §7)",
             ));
         }
         if file.checkpoints.is_empty()

@@ -1,4 +1,4 @@
-//! Accuracy metrics over independent trials (spec §7), as mergeable accumulators.
+//! Accuracy metrics over independent trials (docs/estimators.md §7), as mergeable accumulators.
 //!
 //! Each (distribution, estimator, n) cell keeps central moments of the estimate, of its
 //! squared error and of its absolute relative error, a log-binned histogram of the absolute
@@ -43,7 +43,7 @@ mod opt_f64_bits {
     }
 }
 
-/// Two-sided 95% normal quantile used by every interval (spec §7).
+/// Two-sided 95% normal quantile used by every interval (docs/estimators.md §7).
 pub const Z: f64 = 1.96;
 
 /// Histogram resolution of the relative-error quantiles.
@@ -240,7 +240,7 @@ impl Interval {
     }
 }
 
-/// Wilson score interval for `successes` out of `trials` (spec §7).
+/// Wilson score interval for `successes` out of `trials` (docs/estimators.md §7).
 pub fn wilson(successes: u64, trials: u64) -> Interval {
     let m = trials as f64;
     let p = successes as f64 / m;
@@ -368,7 +368,7 @@ impl CellAccumulator {
         self.estimate.count()
     }
 
-    /// Every metric with its interval; `None` with fewer than 4 trials (spec §7).
+    /// Every metric with its interval; `None` with fewer than 4 trials (docs/estimators.md §7).
     pub fn metrics(&self, mu: f64) -> Option<CellMetrics> {
         let t = self.trials();
         if t < 4 {

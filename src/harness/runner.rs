@@ -230,7 +230,7 @@ fn trial_count(exp: &Experiment, opts: &RunOptions) -> Result<u64> {
         return Err(Error::param(
             "trials",
             trials,
-            "must be at least 4 (spec §7)",
+            "must be at least 4 (docs/estimators.md §7)",
         ));
     }
     Ok(trials)

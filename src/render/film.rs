@@ -5,7 +5,7 @@
 //! The render proceeds in passes between checkpoints. In each pass, rayon hands out rows; a
 //! pixel draws its samples `[s0, s1)` in order, each from its own stream
 //! ([`SampleStream`]), so the image does not depend on the number of threads or on the
-//! checkpoints. After a pass, the image-wide per-channel sample σ (Jung's image mode, spec §4)
+//! checkpoints. After a pass, the image-wide per-channel sample σ (Jung's image mode, docs/estimators.md §4)
 //! is merged in row order and handed to every pixel before the estimates are read.
 //! Non-finite or negative radiance samples are counted and never pushed.
 

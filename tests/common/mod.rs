@@ -1,9 +1,9 @@
 //! Helpers shared by the integration tests that reproduce the spec's worked examples.
 
-/// The running example of spec §1.
+/// The running example of docs/estimators.md §1.
 pub const S: [f64; 7] = [0.6, 1.5, 0.0, 2.2, 4.8, 350.0, 4.1];
 
-/// Worked examples must match to this relative tolerance (spec §1, "Accuracy").
+/// Worked examples must match to this relative tolerance (docs/estimators.md §1, "Accuracy").
 pub const REL: f64 = 1e-12;
 
 /// Asserts `|actual - expected| <= tol * |expected|` (exact equality when `expected` is 0).
