@@ -29,8 +29,7 @@ Usage (any CPython 3.11 with the venv module and pip; nothing else needs to be i
     python3 experiments/crosscheck_mitsuba.py [SCENE.xml ...] [--spp N] [--seeds K]
         [--block B] [--threads T] [--quick] [--no-build] [--mitsuba-only] [--out DIR]
 
-Scenes default to every *.xml in ../shared/scenes/ (beside the repository, if it exists) and in
-experiments/scenes/. The script makes its own virtual environment in experiments/.venv-mitsuba,
+Scenes default to every *.xml in experiments/scenes/. The script makes its own virtual environment in experiments/.venv-mitsuba,
 installs the pinned Mitsuba, Dr.Jit, NumPy and SciPy there if they are missing, and re-runs
 itself inside it. It builds the binary with `cargo build --release` unless --no-build or
 --mitsuba-only. It prints a Markdown table and writes it with a JSON report to
@@ -59,7 +58,6 @@ ROOT = HERE.parent
 VENV_DIR = HERE / ".venv-mitsuba"
 BINARY = ROOT / "target" / "release" / "fireflies"
 OUR_SCENES = HERE / "scenes"
-SHARED_SCENES = ROOT.parent / "shared" / "scenes"
 DEFAULT_OUT = ROOT / "reports" / "crosscheck"
 # Set in the environment of the re-executed script, so a broken venv cannot loop forever.
 REEXEC_FLAG = "FIREFLIES_CROSSCHECK_IN_VENV"
@@ -141,16 +139,12 @@ def ensure_venv_and_reexec() -> None:
 # --- scenes and renderers ----------------------------------------------------------------------
 
 def default_scenes() -> list:
-    scenes = []
-    for folder in (SHARED_SCENES, OUR_SCENES):
-        if folder.is_dir():
-            scenes.extend(sorted(folder.glob("*.xml")))
-    return scenes
+    return sorted(OUR_SCENES.glob("*.xml"))
 
 
 def label(path: Path) -> str:
-    """The scene's name in the report: its path relative to the repository (shared scenes
-    come out as ../shared/scenes/NAME.xml), so equal file names stay apart."""
+    """The scene's name in the report: its path relative to the repository, so equal file
+    names in different folders stay apart."""
     return os.path.relpath(path.resolve(), ROOT)
 
 
@@ -417,8 +411,7 @@ def main() -> None:
     global FAMILY_ALPHA
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("scene_args", nargs="*", metavar="SCENE", type=Path,
-                        help="scene files (default: ../shared/scenes/*.xml and "
-                             "experiments/scenes/*.xml)")
+                        help="scene files (default: experiments/scenes/*.xml)")
     parser.add_argument("--scenes", nargs="+", type=Path, default=[], metavar="SCENE",
                         help="scene files, as the positional arguments")
     parser.add_argument("--spp", type=int, help=f"samples per pixel (default {DEFAULT_SPP}; "
