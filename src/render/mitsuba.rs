@@ -899,12 +899,27 @@ impl<'a, 'i> Loader<'a, 'i> {
                     let axis = self.xyz(op, 0.0)?;
                     let angle_text = self.required_attr(op, "angle")?;
                     let angle = self.number(op, "angle", &angle_text)?;
-                    let Some(axis) = axis.try_normalize() else {
+                    // Mitsuba rejects a zero axis ("rotation axis cannot be zero").
+                    if axis == Vec3::ZERO {
                         return Err(
                             self.err(op, format!("rotation axis {} is zero", vec_text(axis)))
                         );
-                    };
-                    Mat4::from_axis_angle(axis, angle.to_radians())
+                    }
+                    // Mitsuba 3 (Dr.Jit's `rotate`) uses the axis `a` as given, without
+                    // normalising it: M = cos·I + (1 − cos)·a·aᵀ + sin·[a]×. For a non-unit
+                    // axis that is not a pure rotation, but it is what Mitsuba renders. Its
+                    // XML parser evaluates it in double precision and rounds to float.
+                    let [x, y, z] = axis.to_array().map(f64::from);
+                    let (s, c) = f64::from(angle).to_radians().sin_cos();
+                    let k = 1.0 - c;
+                    // Row-major; glam takes columns, hence the transpose.
+                    let rows = [
+                        [x * x * k + c, x * y * k - z * s, x * z * k + y * s],
+                        [y * x * k + z * s, y * y * k + c, y * z * k - x * s],
+                        [z * x * k - y * s, z * y * k + x * s, z * z * k + c],
+                    ];
+                    let rows = rows.map(|row| row.map(|v| v as f32));
+                    Mat4::from_mat3(Mat3::from_cols_array_2d(&rows).transpose())
                 }
                 "scale" => {
                     self.check_attrs(op, &["x", "y", "z", "value"])?;
