@@ -46,7 +46,7 @@ pub fn run(args: &GateArgs, memory: MemoryLimit) -> Result<ExitCode> {
                 .out
                 .clone()
                 .unwrap_or_else(|| PathBuf::from("reports").join(&exp.name));
-            std::fs::create_dir_all(&dir).map_err(|e| Error::io(dir.display(), &e))?;
+            report::prepare_report_dir(&dir)?;
             let opts = RunOptions {
                 trials: args.trials,
                 threads: args.threads,
@@ -56,7 +56,8 @@ pub fn run(args: &GateArgs, memory: MemoryLimit) -> Result<ExitCode> {
             };
             let out = harness::run(&exp, &opts)?;
             let checks = harness::checks::evaluate(&exp, &out);
-            report::write_tables(&dir, &exp, &out, &checks)?;
+            // The tables only (no plots), replacing the report at `dir` as a unit.
+            report::write_report(&dir, &exp, &out, &checks, false)?;
             dir.join("results.csv")
         }
     };

@@ -19,7 +19,7 @@ pub struct MergeArgs {
 pub fn run(args: &MergeArgs) -> Result<ExitCode> {
     let files = shards::find_shard_files(&args.inputs)?;
     let (exp, out) = shards::merge(&files)?;
-    std::fs::create_dir_all(&args.out).map_err(|e| fireflies::Error::io(args.out.display(), &e))?;
+    fireflies::report::prepare_report_dir(&args.out)?;
     eprintln!("merged {} shards of {}", files.len(), exp.name);
     super::run::report_run(&args.out, &exp, &out)
 }

@@ -38,8 +38,13 @@ pub fn run(args: &RunArgs, memory: MemoryLimit) -> Result<ExitCode> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&exp.name));
-    // Fail on an unwritable directory before spending the run.
-    std::fs::create_dir_all(&dir).map_err(|e| fireflies::Error::io(dir.display(), &e))?;
+    // Fail on an unusable directory before spending the run. A report replaces `dir` as a
+    // whole; a shard is one file written into it.
+    if args.shard.is_some() {
+        std::fs::create_dir_all(&dir).map_err(|e| fireflies::Error::io(dir.display(), &e))?;
+    } else {
+        report::prepare_report_dir(&dir)?;
+    }
     let opts = RunOptions {
         trials: args.trials,
         threads: args.threads,
@@ -81,11 +86,11 @@ pub fn load(path: Option<&std::path::Path>, seed: Option<u64>) -> Result<Experim
     Ok(exp)
 }
 
-/// Checks, tables and plots of a finished run; exit code 1 when a gating check failed.
+/// Checks, tables and plots of a finished run, replacing the report at `dir` as a unit; exit
+/// code 1 when a gating check failed.
 pub fn report_run(dir: &std::path::Path, exp: &Experiment, out: &RunOutput) -> Result<ExitCode> {
     let checks = harness::checks::evaluate(exp, out);
-    let rows = report::write_tables(dir, exp, out, &checks)?;
-    report::plots::write_plots(dir, &rows)?;
+    report::write_report(dir, exp, out, &checks, true)?;
     let failed: Vec<_> = checks.iter().filter(|c| !c.passed).collect();
     let fails_run = checks.iter().any(|c| c.fails_run());
     eprintln!(

@@ -6,6 +6,7 @@ use super::runner::{self, RunOutput, ShardOutput};
 use crate::error::{Error, Result};
 use crate::limits::shorten;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// Version of the shard file layout.
@@ -113,18 +114,9 @@ pub fn merge(files: &[PathBuf]) -> Result<(Experiment, RunOutput)> {
         ),
     };
     let count = first.output.shard.count;
-    // Counts come from the files: check them against what was given before allocating.
-    if count == 0 || count > shards.len() as u64 {
-        return Err(Error::Io {
-            path: first_path.display().to_string(),
-            message: format!(
-                "shard {}/{count}: {} of {count} shard files given; every shard is needed",
-                first.output.shard.index,
-                shards.len()
-            ),
-        });
-    }
-    let mut seen: Vec<Option<&PathBuf>> = vec![None; count as usize];
+    // Counts and indices come from the files: keep what was seen in a map, never in a vector
+    // sized by a count a file claims.
+    let mut seen: BTreeMap<u64, &PathBuf> = BTreeMap::new();
     for (path, s) in &shards {
         if s.format != first.format {
             return Err(mismatch(
@@ -175,28 +167,22 @@ pub fn merge(files: &[PathBuf]) -> Result<(Experiment, RunOutput)> {
                 count.to_string(),
             ));
         }
-        let Some(slot) = usize::try_from(s.output.shard.index)
-            .ok()
-            .and_then(|i| seen.get_mut(i))
-        else {
+        let index = s.output.shard.index;
+        if index >= count {
             return Err(Error::Io {
                 path: path.display().to_string(),
-                message: format!("shard index {} is not below its count {count}", s.output.shard.index),
-            });
-        };
-        if let Some(other) = slot {
-            return Err(Error::Io {
-                path: path.display().to_string(),
-                message: format!(
-                    "duplicated shard {}/{count}: also in {}",
-                    s.output.shard.index,
-                    other.display()
-                ),
+                message: format!("shard index {index} is not below its count {count}"),
             });
         }
-        *slot = Some(path);
+        if let Some(other) = seen.insert(index, path) {
+            return Err(Error::Io {
+                path: path.display().to_string(),
+                message: format!("duplicated shard {index}/{count}: also in {}", other.display()),
+            });
+        }
     }
-    if let Some(missing) = seen.iter().position(Option::is_none) {
+    // The first gap is found within `seen.len() + 1` steps, however large `count` is.
+    if let Some(missing) = (0..count).find(|i| !seen.contains_key(i)) {
         return Err(Error::param(
             "shards",
             format!("{missing}/{count}"),
