@@ -66,28 +66,6 @@ pub enum Error {
         /// What is wrong with it, naming the parameter and its value.
         reason: String,
     },
-    /// A token in a sample file that is not a decimal number.
-    #[error("{file}:{line}: malformed number '{token}'")]
-    MalformedNumber {
-        /// File name (`-` for stdin).
-        file: String,
-        /// 1-based line number.
-        line: usize,
-        /// The offending token.
-        token: String,
-    },
-    /// A number in a sample file that is not a valid sample (NaN, infinite or negative).
-    #[error("{file}:{line}: invalid sample at index {index}: {}", Num(*value))]
-    InvalidSampleInFile {
-        /// File name (`-` for stdin).
-        file: String,
-        /// 1-based line number.
-        line: usize,
-        /// Position of the sample in the file's stream (0-based).
-        index: u64,
-        /// The sample itself.
-        value: f64,
-    },
     /// A scene file (Mitsuba 3 XML subset) that cannot be loaded: unknown or misspelt element,
     /// plugin or parameter, a malformed or out-of-range value, a missing required element, or an
     /// unreadable referenced file.

@@ -2,7 +2,8 @@
 //! bounded variance; the cheapest firefly remedy renderers ship, and the baseline robust
 //! methods must beat.
 
-use super::{Estimator, EstimatorSpec, Neumaier, empty};
+use super::numeric::ScaledSum;
+use super::{Estimator, EstimatorSpec, empty};
 use crate::error::{Error, Result};
 use std::fmt;
 
@@ -10,7 +11,8 @@ use std::fmt;
 #[derive(Debug, Clone)]
 pub struct Clamp {
     c: f64,
-    sum: Neumaier,
+    /// Rescaled before it overflows, so a clamp near `f64::MAX` stays finite.
+    sum: ScaledSum,
     n: u64,
 }
 
@@ -22,7 +24,7 @@ impl Clamp {
         }
         Ok(Clamp {
             c,
-            sum: Neumaier::new(),
+            sum: ScaledSum::new(),
             n: 0,
         })
     }
@@ -47,9 +49,8 @@ impl Estimator for Clamp {
     }
 
     fn push_slice(&mut self, samples: &[f64]) {
-        for &s in samples {
-            self.sum.add(s.min(self.c));
-        }
+        let c = self.c;
+        self.sum.add_all(samples.iter().map(|&s| s.min(c)));
         self.n += samples.len() as u64;
     }
 
@@ -61,7 +62,7 @@ impl Estimator for Clamp {
         if self.n == 0 {
             return Err(empty(self));
         }
-        Ok(self.sum.value() / self.n as f64)
+        Ok(self.sum.mean(self.n))
     }
 
     fn state_bytes(&self) -> usize {
@@ -73,7 +74,7 @@ impl Estimator for Clamp {
     }
 
     fn reset(&mut self) {
-        self.sum = Neumaier::new();
+        self.sum = ScaledSum::new();
         self.n = 0;
     }
 }

@@ -5,6 +5,11 @@
 //! One partition per odd `M` in `1..=m_max` is kept so the choice can be made at estimate
 //! time, when the pixel's spread is known. Image mode ([`Jung::set_sigma_image`]) lets a
 //! renderer feed the running spread of all samples of the image (spec §4).
+//!
+//! Overflow: `σ_pixel` is spec §1's Welford literally, `+inf` once its squared deviations
+//! overflow (samples spread over more than about `1e154`), which selects `M = m_max`
+//! (`tests/hard_cases.rs` pins this). The sets' sums are rescaled before they overflow (see
+//! [`Partition`]), so the estimate itself is finite for any finite samples.
 
 use super::mon::{Partition, median_sorted};
 use super::{Estimator, EstimatorSpec, Extra, Extras, Welford, empty};

@@ -1,14 +1,16 @@
 //! The plain sample mean ([B] eq. 1): unbiased, and the reference every robust method is
-//! compared with. Compensated summation keeps it exact over 10^8-sample streams.
+//! compared with. Compensated summation keeps it exact over 10^8-sample streams, and the
+//! sum's rescaling keeps it finite for any finite samples (`[1e308; 3]` has mean `1e308`).
 
-use super::{Estimator, EstimatorSpec, Neumaier, empty};
+use super::numeric::ScaledSum;
+use super::{Estimator, EstimatorSpec, empty};
 use crate::error::Result;
 use std::fmt;
 
 /// Neumaier sum of the samples divided by their count.
 #[derive(Debug, Clone, Default)]
 pub struct Mean {
-    sum: Neumaier,
+    sum: ScaledSum,
     n: u64,
 }
 
@@ -33,9 +35,7 @@ impl Estimator for Mean {
     }
 
     fn push_slice(&mut self, samples: &[f64]) {
-        for &s in samples {
-            self.sum.add(s);
-        }
+        self.sum.add_all(samples.iter().copied());
         self.n += samples.len() as u64;
     }
 
@@ -47,7 +47,7 @@ impl Estimator for Mean {
         if self.n == 0 {
             return Err(empty(self));
         }
-        Ok(self.sum.value() / self.n as f64)
+        Ok(self.sum.mean(self.n))
     }
 
     fn state_bytes(&self) -> usize {

@@ -7,17 +7,26 @@
 //! on the `K = min(n, M)` non-empty set means. **Decision (spec §3):** wherever [B] writes M in
 //! the median, Gini, `k` and `c`, K is used; the two differ only while `n < M`.
 
+use super::numeric::{ScaledSum, ScaledSums};
 use super::{Estimator, EstimatorSpec, Extra, Extras, Neumaier, empty};
 use crate::error::{Error, Result};
+use arrayvec::ArrayVec;
 use std::fmt;
 
 /// Largest accepted M: a pixel's state is 16 bytes a set, so this caps it at 16 MiB.
 pub const MAX_SETS: usize = 1 << 20;
 
+/// Most sets one unchecked block loop may touch: their undo copy (16 bytes a set, 4 KiB)
+/// lives on the stack.
+const UNCHECKED_SETS: usize = 256;
+
 /// Round-robin partition of a stream into M sets, each a compensated sum.
+///
+/// Each set's sum is rescaled on its own if it would overflow (see `numeric`), so set means
+/// are finite for any finite samples and bit-identical to the plain ones when those are.
 #[derive(Debug, Clone)]
 pub struct Partition {
-    sums: Vec<Neumaier>,
+    sums: ScaledSums,
     cursor: usize,
     n: u64,
 }
@@ -33,7 +42,7 @@ impl Partition {
             ));
         }
         Ok(Partition {
-            sums: vec![Neumaier::new(); m],
+            sums: ScaledSums::new(m),
             cursor: 0,
             n: 0,
         })
@@ -52,7 +61,7 @@ impl Partition {
     /// Adds one sample to the next set in turn.
     #[inline(always)]
     pub fn push(&mut self, sample: f64) {
-        self.sums[self.cursor].add(sample);
+        self.sums.add(self.cursor, sample);
         self.cursor += 1;
         if self.cursor == self.sums.len() {
             self.cursor = 0;
@@ -61,33 +70,91 @@ impl Partition {
     }
 
     /// Adds a block; same result as pushing one by one.
+    ///
+    /// The block runs the plain compensated sums with no per-sample test, then checks each set
+    /// it touched once: sums of non-negative samples never decrease, so a set below the limit
+    /// at the end never passed it. If one did, the block is undone (from a copy of the touched
+    /// sets, kept on the stack) and pushed sample by sample, which rescales that set. With
+    /// more than [`UNCHECKED_SETS`] sets, pieces of that many samples go through in turn.
     pub fn push_slice(&mut self, samples: &[f64]) {
-        let m = self.sums.len();
+        if samples.len() < self.sums.len() {
+            // Each set touched gets one sample: one comparison per addition costs less than
+            // the undo copy would.
+            samples.iter().for_each(|&s| self.push(s));
+        } else if self.sums.any_scaled() {
+            self.push_each(samples);
+        } else if self.sums.len() <= UNCHECKED_SETS {
+            self.push_piece(samples);
+        } else {
+            samples
+                .chunks(UNCHECKED_SETS)
+                .for_each(|piece| self.push_piece(piece));
+        }
+    }
+
+    /// [`Partition::push_slice`] for a block that touches at most [`UNCHECKED_SETS`] sets.
+    fn push_piece(&mut self, samples: &[f64]) {
+        if !self.sums.any_scaled() {
+            let (start, m) = (self.cursor, self.sums.len());
+            // The sets the block touches, in turn from the cursor: `first`, then `second`
+            // after wrapping around (empty unless the block reaches the last set).
+            let end = start + samples.len().min(m);
+            let (first, second) = (start..end.min(m), 0..end.saturating_sub(m));
+            let sums = self.sums.plain_mut();
+            let mut before = ArrayVec::<Neumaier, UNCHECKED_SETS>::new();
+            let saved = before.try_extend_from_slice(&sums[first.clone()]).is_ok()
+                && (second.is_empty() || before.try_extend_from_slice(&sums[second.clone()]).is_ok());
+            if saved {
+                Self::push_unchecked(sums, &mut self.cursor, samples);
+                let fits = |range: std::ops::Range<usize>| {
+                    sums[range].iter().fold(true, |ok, s| ok & s.below_limit())
+                };
+                if fits(first.clone()) && (second.is_empty() || fits(second.clone())) {
+                    self.n += samples.len() as u64;
+                    return;
+                }
+                let (a, b) = before.split_at(first.len());
+                sums[first].copy_from_slice(a);
+                sums[second].copy_from_slice(b);
+                self.cursor = start;
+            }
+        }
+        self.push_each(samples);
+    }
+
+    /// [`Partition::push`] on each sample: the fallback of the block paths, kept out of line
+    /// so that they stay small functions.
+    #[cold]
+    #[inline(never)]
+    fn push_each(&mut self, samples: &[f64]) {
+        samples.iter().for_each(|&s| self.push(s));
+    }
+
+    /// The plain block loop over the sets' accumulators (no overflow check).
+    #[inline(always)]
+    fn push_unchecked(sums: &mut [Neumaier], cursor: &mut usize, samples: &[f64]) {
+        let m = sums.len();
         let mut rest = samples;
         // Finish the current round, then whole rounds, so the inner loop has no wrap test.
-        let head = (m - self.cursor).min(rest.len());
-        for (sum, &s) in self.sums[self.cursor..self.cursor + head]
-            .iter_mut()
-            .zip(rest)
-        {
+        let head = (m - *cursor).min(rest.len());
+        for (sum, &s) in sums[*cursor..*cursor + head].iter_mut().zip(rest) {
             sum.add(s);
         }
-        self.cursor = (self.cursor + head) % m;
+        *cursor = (*cursor + head) % m;
         rest = &rest[head..];
         let mut rounds = rest.chunks_exact(m);
         for round in &mut rounds {
-            for (sum, &s) in self.sums.iter_mut().zip(round) {
+            for (sum, &s) in sums.iter_mut().zip(round) {
                 sum.add(s);
             }
         }
         let tail = rounds.remainder();
-        for (sum, &s) in self.sums.iter_mut().zip(tail) {
+        for (sum, &s) in sums.iter_mut().zip(tail) {
             sum.add(s);
         }
         if !tail.is_empty() {
-            self.cursor = tail.len();
+            *cursor = tail.len();
         }
-        self.n += samples.len() as u64;
     }
 
     /// The `K = min(n, M)` non-empty set means, ascending, written into `out`.
@@ -96,25 +163,33 @@ impl Partition {
         let k = self.n.min(m) as usize;
         let (base, extra) = (self.n / m, (self.n % m) as usize);
         out.clear();
-        out.extend(self.sums[..k].iter().enumerate().map(|(i, s)| {
+        out.extend((0..k).map(|i| {
             let count = base + u64::from(i < extra);
-            s.value() / count as f64
+            self.sums.mean(i, count as f64)
         }));
         out.sort_unstable_by(f64::total_cmp);
     }
 
     /// Forgets every sample.
     pub fn reset(&mut self) {
-        self.sums.fill(Neumaier::new());
+        self.sums.reset(self.sums.len());
         self.cursor = 0;
         self.n = 0;
     }
 
     /// Heap bytes held by the sets.
     pub fn heap_bytes(&self) -> usize {
-        self.sums.capacity() * std::mem::size_of::<Neumaier>()
+        self.sums.heap_bytes()
     }
 }
+
+/// `2^-128`: the factor by which the estimate-time fallbacks below rescale set means whose
+/// plain sums overflow (exact; means below `2^-946` lose bits, far below one rounding of a
+/// sum of values that large).
+const THETA_DOWN: f64 = f64::from_bits((1023 - 128) << 52);
+
+/// `2^128`, undoing [`THETA_DOWN`].
+const THETA_UP: f64 = f64::from_bits((1023 + 128) << 52);
 
 /// Median of ascending values (mean of the two middle ones for an even count).
 pub fn median_sorted(theta: &[f64]) -> f64 {
@@ -122,25 +197,41 @@ pub fn median_sorted(theta: &[f64]) -> f64 {
     if k % 2 == 1 {
         theta[k / 2]
     } else {
-        (theta[k / 2 - 1] + theta[k / 2]) / 2.0
+        let (a, b) = (theta[k / 2 - 1], theta[k / 2]);
+        let m = (a + b) / 2.0;
+        // a + b overflows only above 2^1023, where halving first is exact.
+        if m.is_finite() { m } else { a / 2.0 + b / 2.0 }
     }
 }
 
 /// Gini coefficient of ascending non-negative values ([B] App. A eq. 7), in `[0, 1)`:
 /// 0 when all are equal, near 1 when one value holds all the mass.
+///
+/// G does not change when every value is multiplied by a power of two, so when the plain sums
+/// overflow they are recomputed on the values times `2^-128`: the result is then exactly what
+/// the plain formula gives with an unlimited exponent range.
 pub fn gini(theta: &[f64]) -> f64 {
     let k = theta.len();
-    let (mut s1, mut s2) = (0.0, 0.0);
-    for (j, &t) in theta.iter().enumerate() {
-        s1 += t;
-        s2 += (j + 1) as f64 * t;
-    }
-    if s1 == 0.0 {
-        return 0.0;
-    }
+    let sums = |scale: f64| {
+        let (mut s1, mut s2) = (0.0, 0.0);
+        for (j, &t) in theta.iter().enumerate() {
+            let t = t * scale;
+            s1 += t;
+            s2 += (j + 1) as f64 * t;
+        }
+        (s1, s2)
+    };
     let kf = k as f64;
-    let g = (2.0 * s2) / (kf * s1) - (kf + 1.0) / kf;
-    g.max(0.0)
+    let g = |(s1, s2): (f64, f64)| {
+        if s1 == 0.0 {
+            return Some(0.0);
+        }
+        let (num, den) = (2.0 * s2, kf * s1);
+        // None when a term overflowed (it would give NaN or a wrong 0).
+        (num.is_finite() && den.is_finite()).then(|| (num / den - (kf + 1.0) / kf).max(0.0))
+    };
+    // With the values times 2^-128 (at most 2^896), s2 <= K^2 * 2^896 cannot overflow.
+    g(sums(1.0)).or_else(|| g(sums(THETA_DOWN))).unwrap_or(0.0)
 }
 
 /// G-MoN's trimmed mean ([B] eq. 6): drop `c = floor(G * floor(K/2))` set means at each end.
@@ -151,7 +242,15 @@ pub fn gini_trimmed_mean(theta: &[f64], g: f64) -> (f64, usize) {
     let c = ((g * half).floor() as usize).min((k - 1) / 2);
     let kept = &theta[c..k - c];
     let sum: f64 = kept.iter().fold(0.0, |acc, &t| acc + t);
-    (sum / kept.len() as f64, c)
+    let mean = if sum.is_finite() {
+        sum / kept.len() as f64
+    } else {
+        // The same sum on the values times 2^-128 (exact scaling), scaled back; saturated at
+        // f64::MAX, the nearest value to a mean of finite values that rounds above it.
+        let sum: f64 = kept.iter().fold(0.0, |acc, &t| acc + t * THETA_DOWN);
+        (sum / kept.len() as f64 * THETA_UP).min(f64::MAX)
+    };
+    (mean, c)
 }
 
 macro_rules! partition_estimator {
@@ -294,7 +393,7 @@ impl Estimator for Gmon {
 #[derive(Debug, Clone)]
 pub struct GmonB {
     part: Partition,
-    total: Neumaier,
+    total: ScaledSum,
     threshold: f64,
 }
 
@@ -310,7 +409,7 @@ impl GmonB {
         }
         Ok(GmonB {
             part: Partition::new(m)?,
-            total: Neumaier::new(),
+            total: ScaledSum::new(),
             threshold,
         })
     }
@@ -324,7 +423,7 @@ impl GmonB {
         self.part.sorted_means(&mut theta);
         let g = gini(&theta);
         if g <= self.threshold {
-            Ok((self.total.value() / n as f64, g, false))
+            Ok((self.total.mean(n), g, false))
         } else {
             Ok((median_sorted(&theta), g, true))
         }
@@ -346,9 +445,7 @@ impl Estimator for GmonB {
 
     fn push_slice(&mut self, samples: &[f64]) {
         self.part.push_slice(samples);
-        for &s in samples {
-            self.total.add(s);
-        }
+        self.total.add_all(samples.iter().copied());
     }
 
     fn count(&self) -> u64 {
@@ -382,7 +479,7 @@ impl Estimator for GmonB {
 
     fn reset(&mut self) {
         self.part.reset();
-        self.total = Neumaier::new();
+        self.total = ScaledSum::new();
     }
 }
 

@@ -1,7 +1,41 @@
 //! Compensated summation and running moments shared by the estimators.
+//!
+//! # Overflow
+//!
+//! The mean of finite samples is finite, but their sum need not be: three samples of `1e308`
+//! sum to `+inf`. The sums here therefore keep their running value below [`SUM_LIMIT`]
+//! (`2^1023`): a sum that would reach it is rescaled once by `2^-SUM_SHIFT` (`2^-128`), and so
+//! is every later term. Scaling by a power of two is exact, so the rescaled sum performs the
+//! same roundings as the plain one would with an unlimited exponent range, and a mean read
+//! from it is bit-identical to the plain mean whenever that one is finite. One step suffices
+//! for ever: `n < 2^64` terms of at most `f64::MAX < 2^1024` sum to less than `2^1088`, which
+//! scaled is below `2^960`. The price is that, inside a sum that has reached `2^1023`, terms
+//! below `2^-946` (about `1e-285`) lose their low bits — far below one rounding of that sum.
+//!
+//! The common case costs nothing per term where it matters: the estimators' block loops add
+//! with the plain [`Neumaier::add`] and check afterwards that the running sums stayed below
+//! the limit (sums of non-negative terms never decrease, so a final value below the limit
+//! proves that no partial sum reached it); only when that check fails, or for single pushes,
+//! is each addition checked, with one comparison.
+
+/// Plain running sums are kept below this magnitude, `2^1023`; see the module docs.
+pub(crate) const SUM_LIMIT: f64 = f64::from_bits(0x7FE0_0000_0000_0000);
+
+/// A rescaled sum holds its terms times `2^-SUM_SHIFT`.
+pub(crate) const SUM_SHIFT: i32 = 128;
+
+/// `2^-SUM_SHIFT`.
+const SUM_DOWN: f64 = f64::from_bits(((1023 - SUM_SHIFT) as u64) << 52);
+
+/// `2^SUM_SHIFT`.
+const SUM_UP: f64 = f64::from_bits(((1023 + SUM_SHIFT) as u64) << 52);
 
 /// Neumaier's compensated sum (spec §1): exact to about one rounding for long streams of
 /// samples that differ in magnitude by many decades, where a naive sum loses the small ones.
+///
+/// A bare `Neumaier` overflows like any float sum; the estimators wrap theirs in a sum that
+/// rescales itself by a power of two before its running value reaches `2^1023`, so their
+/// means stay finite.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Neumaier {
     sum: f64,
@@ -21,12 +55,38 @@ impl Neumaier {
     #[inline(always)]
     pub fn add(&mut self, x: f64) {
         let t = self.sum + x;
+        self.step(t, x);
+    }
+
+    /// The update of [`Neumaier::add`] once `t = s + x` is known.
+    #[inline(always)]
+    fn step(&mut self, t: f64, x: f64) {
         if self.sum.abs() >= x.abs() {
             self.compensation += (self.sum - t) + x;
         } else {
             self.compensation += (x - t) + self.sum;
         }
         self.sum = t;
+    }
+
+    /// Adds `x` as [`Neumaier::add`] does, unless the running sum would reach [`SUM_LIMIT`]
+    /// in magnitude (or `x` is not finite): then it changes nothing and returns `false`.
+    #[inline(always)]
+    pub(crate) fn try_add(&mut self, x: f64) -> bool {
+        let t = self.sum + x;
+        if !(t.abs() < SUM_LIMIT) {
+            return false;
+        }
+        self.step(t, x);
+        true
+    }
+
+    /// Whether the running sum is below [`SUM_LIMIT`] in magnitude (false once it overflowed).
+    /// After adding non-negative terms with [`Neumaier::add`], this proves that no partial sum
+    /// reached the limit, since such sums never decrease.
+    #[inline(always)]
+    pub(crate) fn below_limit(&self) -> bool {
+        self.sum.abs() < SUM_LIMIT
     }
 
     /// The compensated total `s + c`.
@@ -40,9 +100,205 @@ impl Neumaier {
         self.add(other.sum);
         self.add(other.compensation);
     }
+
+    /// Adds `x` to a sum that is rescaled (`*scaled`) or must become so because `x` would
+    /// carry it to [`SUM_LIMIT`]. Off the common path.
+    #[cold]
+    #[inline(never)]
+    fn add_scaled(&mut self, scaled: &mut bool, x: f64) {
+        if !*scaled {
+            // Exact: both parts are far above the subnormal range, or negligible beside it.
+            self.sum *= SUM_DOWN;
+            self.compensation *= SUM_DOWN;
+            *scaled = true;
+        }
+        self.add(x * SUM_DOWN);
+    }
+
+    /// `value / count`, undoing the rescaling (saturated at `f64::MAX`: the true mean of
+    /// finite terms is at most the largest of them, so `f64::MAX` is the nearest value to it
+    /// when the rounded quotient lands just above).
+    #[inline]
+    fn mean_of(&self, scaled: bool, count: f64) -> f64 {
+        let m = self.value() / count;
+        if scaled {
+            (m * SUM_UP).min(f64::MAX)
+        } else {
+            m
+        }
+    }
+}
+
+/// A [`Neumaier`] sum that cannot overflow: it rescales itself by `2^-128` when its running
+/// value would reach `2^1023` (see the module docs). Until then it is bit-identical to a
+/// bare [`Neumaier`] sum.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct ScaledSum {
+    acc: Neumaier,
+    /// The accumulator holds the terms times `2^-SUM_SHIFT`.
+    scaled: bool,
+}
+
+impl ScaledSum {
+    /// An empty sum.
+    pub(crate) const fn new() -> Self {
+        ScaledSum {
+            acc: Neumaier::new(),
+            scaled: false,
+        }
+    }
+
+    /// Adds one finite term of any sign; one comparison beyond the plain addition.
+    #[inline(always)]
+    pub(crate) fn add(&mut self, x: f64) {
+        if self.scaled || !self.acc.try_add(x) {
+            self.acc.add_scaled(&mut self.scaled, x);
+        }
+    }
+
+    /// Adds finite, **non-negative** terms in order; same result as [`ScaledSum::add`] on each.
+    /// The loop is the plain compensated sum; the limit is checked once at the end (the sum
+    /// never decreases), and only if it was passed is the block redone term by term.
+    #[inline(always)]
+    pub(crate) fn add_all(&mut self, terms: impl Iterator<Item = f64> + Clone) {
+        if !self.scaled {
+            // On a copy, so that the rare undo is just not storing it.
+            let mut acc = self.acc;
+            for x in terms.clone() {
+                acc.add(x);
+            }
+            if acc.below_limit() {
+                self.acc = acc;
+                return;
+            }
+        }
+        self.add_each(terms);
+    }
+
+    /// [`ScaledSum::add`] on each term: `add_all`'s fallback, kept out of line so that the
+    /// common path stays a small function.
+    #[cold]
+    #[inline(never)]
+    fn add_each(&mut self, terms: impl Iterator<Item = f64>) {
+        for x in terms {
+            self.add(x);
+        }
+    }
+
+    /// The sum divided by `count` (`count > 0`): finite, and bit-identical to
+    /// `Neumaier::value() / count` whenever that is finite.
+    #[inline]
+    pub(crate) fn mean(&self, count: u64) -> f64 {
+        self.acc.mean_of(self.scaled, count as f64)
+    }
+}
+
+/// Compensated sums held side by side (the sets of a partition, a cascade's buffers), each
+/// rescaled on its own when it would overflow, as a [`ScaledSum`]: a sum of huge samples is
+/// rescaled while its neighbours, which may hold tiny ones, keep full precision. The flags
+/// are allocated only once a sum is rescaled, so the common state is 16 bytes a sum.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct ScaledSums {
+    sums: Vec<Neumaier>,
+    /// Empty while no sum is rescaled; else one flag per sum.
+    scaled: Vec<bool>,
+}
+
+impl ScaledSums {
+    /// `len` empty sums.
+    pub(crate) fn new(len: usize) -> Self {
+        ScaledSums {
+            sums: vec![Neumaier::new(); len],
+            scaled: Vec::new(),
+        }
+    }
+
+    /// Number of sums.
+    #[inline]
+    pub(crate) fn len(&self) -> usize {
+        self.sums.len()
+    }
+
+    /// Whether any sum has been rescaled (then the unchecked block paths must not be used).
+    #[inline]
+    pub(crate) fn any_scaled(&self) -> bool {
+        !self.scaled.is_empty()
+    }
+
+    /// The accumulators themselves, for block loops that add with the plain
+    /// [`Neumaier::add`]. Only valid while [`ScaledSums::any_scaled`] is false, and the caller
+    /// must then check [`Neumaier::below_limit`] on every sum it touched (and undo the block
+    /// if one fails).
+    #[inline]
+    pub(crate) fn plain_mut(&mut self) -> &mut [Neumaier] {
+        debug_assert!(!self.any_scaled());
+        &mut self.sums
+    }
+
+    /// Sum `i` as a plain accumulator (see [`ScaledSums::plain_mut`]).
+    #[inline]
+    pub(crate) fn plain(&self, i: usize) -> Option<Neumaier> {
+        self.sums.get(i).copied()
+    }
+
+    /// Adds one finite term of any sign to sum `i`; one comparison beyond the plain addition.
+    #[inline(always)]
+    pub(crate) fn add(&mut self, i: usize, x: f64) {
+        if self.scaled.is_empty() {
+            if self.sums[i].try_add(x) {
+                return;
+            }
+            self.scaled = vec![false; self.sums.len()];
+        } else if !self.scaled[i] && self.sums[i].try_add(x) {
+            return;
+        }
+        self.sums[i].add_scaled(&mut self.scaled[i], x);
+    }
+
+    /// Sum `i` divided by `count` (`count > 0`), as [`ScaledSum::mean`].
+    #[inline]
+    pub(crate) fn mean(&self, i: usize, count: f64) -> f64 {
+        let scaled = self.scaled.get(i).copied().unwrap_or(false);
+        self.sums[i].mean_of(scaled, count)
+    }
+
+    /// Grows to `len` empty sums (allocating exactly what is needed).
+    pub(crate) fn grow(&mut self, len: usize) {
+        if self.sums.len() < len {
+            self.sums.reserve_exact(len - self.sums.len());
+            self.sums.resize(len, Neumaier::new());
+            if self.any_scaled() {
+                self.scaled.resize(len, false);
+            }
+        }
+    }
+
+    /// Drops the sums from `len` on (keeping the allocation).
+    pub(crate) fn truncate(&mut self, len: usize) {
+        self.sums.truncate(len);
+        self.scaled.truncate(len);
+    }
+
+    /// Empties every sum and keeps the first `len` (keeping the allocation of the sums).
+    pub(crate) fn reset(&mut self, len: usize) {
+        self.sums.truncate(len);
+        self.sums.fill(Neumaier::new());
+        self.scaled = Vec::new();
+    }
+
+    /// Heap bytes held.
+    pub(crate) fn heap_bytes(&self) -> usize {
+        self.sums.capacity() * std::mem::size_of::<Neumaier>()
+            + self.scaled.capacity() * std::mem::size_of::<bool>()
+    }
 }
 
 /// Welford's running mean and population variance (spec §1), mergeable with Chan et al.'s rule.
+///
+/// Unlike the sums above, it is **not** rescaled: spec §1 defines `sigma` as `+inf` once `m2`
+/// overflows (observations spread over more than about `1e154`), and Jung's choice of `M`
+/// follows that literally (`tests/hard_cases.rs` pins it); `M = m_max` then, and the estimate
+/// stays finite.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Welford {
     count: u64,
@@ -111,12 +367,59 @@ mod tests {
     use super::*;
 
     #[test]
+    fn constants_are_the_powers_of_two_they_name() {
+        assert_eq!(SUM_LIMIT, 2f64.powi(1023));
+        assert_eq!(SUM_DOWN, 2f64.powi(-128));
+        assert_eq!(SUM_UP, 2f64.powi(128));
+    }
+
+    #[test]
     fn neumaier_keeps_small_terms_a_naive_sum_drops() {
         let mut s = Neumaier::new();
         s.add(1e100);
         s.add(1.0);
         s.add(-1e100);
         assert_eq!(s.value(), 1.0);
+    }
+
+    #[test]
+    fn scaled_sum_is_plain_until_the_limit_and_finite_beyond() {
+        let xs = [0.6, 1.5, 0.0, 2.2, 4.8, 350.0, 4.1];
+        let mut plain = Neumaier::new();
+        let (mut one, mut block) = (ScaledSum::new(), ScaledSum::new());
+        xs.iter().for_each(|&x| {
+            plain.add(x);
+            one.add(x);
+        });
+        block.add_all(xs.iter().copied());
+        let want = plain.value() / 7.0;
+        assert_eq!(one.mean(7).to_bits(), want.to_bits());
+        assert_eq!(block.mean(7).to_bits(), want.to_bits());
+
+        let (mut one, mut block) = (ScaledSum::new(), ScaledSum::new());
+        [1e308; 3].iter().for_each(|&x| one.add(x));
+        block.add_all([1e308; 3].into_iter());
+        assert_eq!(one.mean(3), 1e308);
+        assert_eq!(block.mean(3), 1e308);
+        assert_eq!(one, block);
+    }
+
+    #[test]
+    fn scaled_sums_rescale_one_sum_and_keep_the_others() {
+        let mut s = ScaledSums::new(2);
+        for _ in 0..4 {
+            s.add(0, f64::MAX);
+            s.add(1, 1e-300);
+        }
+        assert!(s.any_scaled());
+        assert_eq!(s.mean(0, 4.0), f64::MAX);
+        assert_eq!(s.mean(1, 4.0), 1e-300);
+        s.grow(3);
+        s.add(2, 3.0);
+        assert_eq!(s.mean(2, 1.0), 3.0);
+        s.reset(1);
+        assert!(!s.any_scaled());
+        assert_eq!((s.len(), s.mean(0, 1.0)), (1, 0.0));
     }
 
     #[test]

@@ -57,10 +57,11 @@
 //!
 //! [Z]: super::zirr
 
+use super::numeric::{ScaledSum, ScaledSums};
 use super::zirr::Splat;
 use super::{
-    Clamp, Estimator, EstimatorSpec, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon, Neumaier,
-    PajotAdr, PajotHybrid, PajotRot, Zirr, ZirrRef, empty,
+    Clamp, Estimator, EstimatorSpec, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon, PajotAdr,
+    PajotHybrid, PajotRot, Zirr, ZirrRef, empty,
 };
 use crate::error::{Error, Result};
 use std::any::Any;
@@ -305,36 +306,45 @@ impl ZirrLike for ZirrRef {
 struct ZirrRgb<Z> {
     /// The scalar method on the luminance stream: `N`, luminance buffers, weights.
     lum: Z,
-    /// Compensated RGB sums `A_j(RGB)`, grown as the samples reach higher buffers (a buffer
-    /// the luminance cascade has but no sample reached yet is absent here, i.e. zero).
-    rgb: Vec<[Neumaier; 3]>,
+    /// Compensated RGB sums `A_j(RGB)`, channel `c` of buffer `j` at index `3j + c`, grown as
+    /// the samples reach higher buffers (a buffer the luminance cascade has but no sample
+    /// reached yet is absent here, i.e. zero). Each is rescaled on its own before it would
+    /// overflow, as the luminance buffers are.
+    rgb: ScaledSums,
 }
 
 impl<Z: ZirrLike> ZirrRgb<Z> {
     fn new(lum: Z) -> Self {
         ZirrRgb {
             lum,
-            rgb: Vec::new(),
+            rgb: ScaledSums::new(0),
         }
     }
 
-    /// The buffers `0..len` as `&mut`, grown (exactly) if needed.
+    /// Makes sure the RGB buffers `0..len` exist (grown exactly).
     #[inline]
-    fn buffers(&mut self, len: usize) -> &mut [[Neumaier; 3]] {
-        if self.rgb.len() < len {
-            self.rgb.reserve_exact(len - self.rgb.len());
-            self.rgb.resize(len, [Neumaier::new(); 3]);
+    fn grow(&mut self, len: usize) {
+        if self.rgb.len() < 3 * len {
+            self.rgb.grow(3 * len);
         }
-        &mut self.rgb[..len]
     }
 
-    /// `Σ_j w_j·B_j(RGB)`, in ascending `j` as the scalar compose sums.
+    /// Adds `rgb` to buffer `j`, each channel scaled by `f(channel value)`.
+    #[inline]
+    fn add(&mut self, j: usize, px: [f64; 3], f: impl Fn(f64) -> f64) {
+        for (c, &x) in px.iter().enumerate() {
+            self.rgb.add(3 * j + c, f(x));
+        }
+    }
+
+    /// `Σ_j w_j·B_j(RGB)`, in ascending `j` as the scalar compose sums (saturated at
+    /// `f64::MAX` as the scalar one is: the real sum is at most the channel's mean).
     fn compose(&self, weights: &[f64]) -> [f64; 3] {
         let nf = self.lum.count() as f64;
         let mut e = [0.0f64; 3];
-        for (w, acc) in weights.iter().zip(&self.rgb) {
-            for c in 0..3 {
-                e[c] += w * (acc[c].value() / nf);
+        for (j, w) in weights.iter().enumerate().take(self.rgb.len() / 3) {
+            for (c, e) in e.iter_mut().enumerate() {
+                *e = (*e + w * self.rgb.mean(3 * j + c, nf)).min(f64::MAX);
             }
         }
         e
@@ -353,25 +363,21 @@ impl<Z: ZirrLike> RgbEstimator for ZirrRgb<Z> {
             let l = luminance(px);
             match self.lum.push_split(l) {
                 Splat::Whole { j } => {
-                    let acc = &mut self.buffers(j + 1)[j];
-                    for c in 0..3 {
-                        acc[c].add(px[c]);
-                    }
+                    self.grow(j + 1);
+                    self.add(j, px, |x| x);
                 }
                 Splat::Split { j, a } => {
-                    let bufs = self.buffers(j + 2);
-                    for c in 0..3 {
-                        let part = a * px[c];
-                        bufs[j][c].add(part);
-                        bufs[j + 1][c].add(px[c] - part);
+                    self.grow(j + 2);
+                    for (c, &x) in px.iter().enumerate() {
+                        let part = a * x;
+                        self.rgb.add(3 * j + c, part);
+                        self.rgb.add(3 * (j + 1) + c, x - part);
                     }
                 }
                 Splat::Clamped { j, v } => {
                     // l >= c_{J-1} > 0: each channel keeps the fraction v/l of itself.
-                    let acc = &mut self.buffers(j + 1)[j];
-                    for c in 0..3 {
-                        acc[c].add(v * (px[c] / l));
-                    }
+                    self.grow(j + 1);
+                    self.add(j, px, |x| v * (x / l));
                 }
             }
         }
@@ -417,7 +423,7 @@ impl<Z: ZirrLike> RgbEstimator for ZirrRgb<Z> {
     }
 
     fn state_bytes(&self) -> usize {
-        size_of::<Self>() + heap_of(&self.lum) + self.rgb.capacity() * size_of::<[Neumaier; 3]>()
+        size_of::<Self>() + heap_of(&self.lum) + self.rgb.heap_bytes()
     }
 
     fn spec(&self) -> EstimatorSpec {
@@ -465,8 +471,8 @@ struct PajotRgb<P> {
     learn: u64,
     /// The bound the list was last released against (after learning).
     m: f64,
-    /// Compensated sums of the accepted RGB samples.
-    sum: [Neumaier; 3],
+    /// Compensated sums of the accepted RGB samples (rescaled before they would overflow).
+    sum: [ScaledSum; 3],
     /// Accepted samples, black ones included.
     accepted: u64,
     /// Samples not accepted yet, `(L, rgb)` ascending in `L`: every non-black sample during
@@ -480,14 +486,14 @@ impl<P: PajotLike> PajotRgb<P> {
             lum,
             learn: u64::try_from(learn).unwrap_or(u64::MAX),
             m: f64::NEG_INFINITY,
-            sum: [Neumaier::new(); 3],
+            sum: [ScaledSum::new(); 3],
             accepted: 0,
             pending: Vec::new(),
         }
     }
 
     #[inline]
-    fn accept(sum: &mut [Neumaier; 3], accepted: &mut u64, px: [f64; 3]) {
+    fn accept(sum: &mut [ScaledSum; 3], accepted: &mut u64, px: [f64; 3]) {
         for c in 0..3 {
             sum[c].add(px[c]);
         }
@@ -587,8 +593,7 @@ impl<P: PajotLike> RgbEstimator for PajotRgb<P> {
         if accepted == 0 {
             return Ok([0.0; 3]);
         }
-        let k = accepted as f64;
-        Ok(sum.map(|s| s.value() / k))
+        Ok(sum.map(|s| s.mean(accepted)))
     }
 
     fn state_bytes(&self) -> usize {

@@ -68,7 +68,17 @@
 //! * **Overflow of `S/u`.** With `u < 1`, a sample above `u·f64::MAX` makes `s = +inf`. With a
 //!   fixed `J` it goes to the top buffer as any over-range sample. With `J = auto` it goes wholly
 //!   to buffer `J_max − 1`, whose reference brightness is `+inf`; it counts 0 there and is always
-//!   rejected. It is counted in `over_range`, which is otherwise 0 for `J = auto`.
+//!   rejected. It is counted in `over_range`, which is otherwise 0 for `J = auto`. A unit whose
+//!   reciprocal overflows (`u <` [`MIN_UNIT`] `≈ 5.56e-309`) is rejected by the constructors:
+//!   there every sample above `u·f64::MAX < 1` would overflow `s` and be dropped, so
+//!   `zirr:u=5e-324` would estimate 0 for any ordinary stream.
+//! * **Overflow of sums.** Each buffer `A_j` (and `zirr-ref`'s discarded energy) is rescaled by
+//!   `2^-128` on its own before its sum would reach `2^1023` (see `numeric`), so `B_j` is finite
+//!   for any finite samples and bit-identical to the plain sum's whenever that one is finite.
+//!   Where the spec's operation order would overflow an intermediate of the weights (`E·N` or
+//!   `κ·c_j` in `zirr-ref`'s colour term), the same quantity is computed in an order that does
+//!   not; and the composed `E`, at most the mean in real arithmetic, is saturated at
+//!   `f64::MAX` against rounding. None of this changes a result that was finite.
 //! * **`zirr-ref` limits.** `J = auto`, `J < 2` and `kappa_min ≠ 1` are errors (the released code
 //!   has a fixed cascade and no separate threshold), and so is a `J` whose top reference
 //!   brightness `c_{J−1}` overflows `f64`, because the top buffer adds `c_{J−1}` per sample.
@@ -104,13 +114,32 @@
 //! scalar method: a `push_split` makes the same additions as `push`, and the weights are those
 //! the estimate composes with.
 
+use super::numeric::{ScaledSum, ScaledSums};
 use super::spec::fmt_f64;
 use super::{CascadeSize, Estimator, EstimatorSpec, Extra, Extras, Neumaier, ZirrParams};
+use crate::error::Num;
 use crate::error::{Error, Result};
+use arrayvec::ArrayVec;
 use std::fmt;
 
 /// The largest cascade (number of buffers) a parameter set may need; larger ones are rejected.
 pub const MAX_BUFFERS: usize = 4096;
+
+/// The smallest unit `u` whose reciprocal is finite (the subnormal just above `2^-1024`).
+/// The splat computes `s = S/u` (spec §5), which overflows for samples above `u·f64::MAX`;
+/// below this unit that bound is under 1, so ordinary samples would all land in the infinite
+/// top buffer and be rejected (`zirr:u=5e-324` estimated 0 for a stream whose mean is 51.9).
+/// Computing in sample units instead would change the spec's operation order, and with it
+/// discrete decisions for ordinary units, so such units are rejected instead.
+pub const MIN_UNIT: f64 = f64::from_bits(0x0004_0000_0000_0001);
+
+/// Blocks at least this long run the unchecked loop (see [`Cascade::push_block`]); shorter
+/// ones, single pushes above all, would spend more on the undo copy than they save.
+const UNCHECKED_MIN: usize = 16;
+
+/// Most buffers the unchecked loop's undo copy holds (16 bytes each, on the stack); longer
+/// cascades take the checked additions.
+const UNCHECKED_BUFFERS: usize = 256;
 
 /// Relative tolerance of the at-most test `x ≼ κ_min` (spec §5).
 const AT_MOST_TOLERANCE: f64 = 1e-9;
@@ -178,7 +207,9 @@ struct Cascade {
     /// Samples with `s > p_{limit−1}`.
     over_range: u64,
     /// Neumaier accumulators `A_j`; always at least one; `limit` of them when `J` is fixed.
-    a: Vec<Neumaier>,
+    /// Each is rescaled on its own before it would overflow, so `B_j` is finite for any finite
+    /// samples (and bit-identical to the plain sum's whenever that is finite).
+    a: ScaledSums,
 }
 
 /// Checks the parameters both variants share and returns the cascade limit.
@@ -221,6 +252,19 @@ fn check_common(p: &ZirrParams) -> Result<usize> {
     }
     if !(u > 0.0 && u.is_finite()) {
         return Err(Error::param("u", fmt_f64(u), "must be finite and > 0"));
+    }
+    if !(u >= MIN_UNIT) {
+        return Err(Error::param(
+            "u",
+            Num(u),
+            format!(
+                "must be in [{}, {}]: 1/u must be finite, else s = S/u overflows for every \
+                 sample above u*f64::MAX = {} and the cascade rejects them all",
+                Num(MIN_UNIT),
+                Num(f64::MAX),
+                Num(u * f64::MAX),
+            ),
+        ));
     }
     match j {
         CascadeSize::Fixed(j) => Ok(j),
@@ -274,7 +318,7 @@ fn locate(b: f64, last: usize, s: f64) -> (usize, f64) {
 
 /// Makes sure buffers `0..len` exist (only ever grows with `J = auto`).
 #[inline(always)]
-fn grow(buf: &mut Vec<Neumaier>, len: usize) {
+fn grow(buf: &mut ScaledSums, len: usize) {
     if buf.len() < len {
         grow_to(buf, len);
     }
@@ -282,9 +326,34 @@ fn grow(buf: &mut Vec<Neumaier>, len: usize) {
 
 #[cold]
 #[inline(never)]
-fn grow_to(buf: &mut Vec<Neumaier>, len: usize) {
-    buf.reserve_exact(len - buf.len());
-    buf.resize(len, Neumaier::new());
+fn grow_to(buf: &mut ScaledSums, len: usize) {
+    buf.grow(len);
+}
+
+/// Adds `v` to buffer `j`: with the checked addition when `CHECKED`, else with the plain one,
+/// to the register copies of `A_0` and `A_1` or to the buffer itself.
+#[inline(always)]
+fn add_to<const CHECKED: bool>(
+    buf: &mut ScaledSums,
+    a0: &mut Neumaier,
+    a1: &mut Neumaier,
+    j: usize,
+    v: f64,
+) {
+    match j {
+        _ if CHECKED => buf.add(j, v),
+        0 => a0.add(v),
+        1 => a1.add(v),
+        _ => buf.plain_mut()[j].add(v),
+    }
+}
+
+/// `e + x`, saturated at `f64::MAX`. The composed estimate is at most `Σ_j B_j`, the mean of
+/// finite samples, so it is at most `f64::MAX` in real arithmetic; only the rounding of a sum
+/// of buffers near it can pass it, and `f64::MAX` is then the nearest value. A no-op otherwise.
+#[inline(always)]
+fn saturating_add(e: f64, x: f64) -> f64 {
+    (e + x).min(f64::MAX)
 }
 
 impl Cascade {
@@ -299,38 +368,72 @@ impl Cascade {
             limit,
             n: 0,
             over_range: 0,
-            a: vec![Neumaier::new(); len],
+            a: ScaledSums::new(len),
         }
     }
 
-    /// Pushes a block of samples (spec §5 "Splat", \[Z\] eqs. 15–16). For a sample at or above
-    /// the top buffer's reference brightness, `top(S, c_{limit−1})` returns what the variant adds
-    /// to the top buffer.
+    /// Pushes a block of samples (spec §5 "Splat", \[Z\] eqs. 15–16). A sample at or above the
+    /// top buffer's reference brightness adds itself to the top buffer, or, with `discarded`
+    /// (`zirr-ref`), adds `c_{limit−1}` there and the rest to `discarded`.
     ///
     /// Hot loop: `A_0` and `A_1`, which take nearly every sample, live in registers for the
     /// whole block (each accumulator still sees the same additions in the same order, so the
     /// result is bit-identical to pushing one sample at a time), and `s = S/u` is not divided
-    /// when `u = 1` (`S/1 = S` exactly).
+    /// when `u = 1` (`S/1 = S` exactly). Its additions are unchecked: the buffers are checked
+    /// once after the block (they only grow, so one below the overflow limit never passed it),
+    /// and in the rare case one did, the block is undone from a copy and pushed again with
+    /// checked additions, which rescale that buffer. Short blocks (single pushes) and cascades
+    /// with a rescaled buffer take the checked additions directly.
     #[inline(always)]
-    fn push_block(&mut self, samples: &[f64], mut top: impl FnMut(f64, f64) -> f64) {
+    fn push_block(&mut self, samples: &[f64], mut discarded: Option<&mut ScaledSum>) {
+        if samples.len() >= UNCHECKED_MIN && !self.a.any_scaled() {
+            let mut before = ArrayVec::<Neumaier, UNCHECKED_BUFFERS>::new();
+            if before.try_extend_from_slice(self.a.plain_mut()).is_ok() {
+                let (n, over_range) = (self.n, self.over_range);
+                let kept = discarded.as_deref().copied();
+                self.push_with::<false>(samples, discarded.as_deref_mut());
+                let plain = self.a.plain_mut();
+                if plain.iter().fold(true, |ok, acc| ok & acc.below_limit()) {
+                    return;
+                }
+                self.a.truncate(before.len());
+                self.a.plain_mut().copy_from_slice(&before);
+                (self.n, self.over_range) = (n, over_range);
+                if let (Some(d), Some(k)) = (discarded.as_deref_mut(), kept) {
+                    *d = k;
+                }
+            }
+        }
+        self.push_with::<true>(samples, discarded);
+    }
+
+    #[inline(always)]
+    fn push_with<const CHECKED: bool>(
+        &mut self,
+        samples: &[f64],
+        discarded: Option<&mut ScaledSum>,
+    ) {
         if self.params.u == 1.0 {
-            self.push_block_with::<true>(samples, &mut top);
+            self.push_block_with::<true, CHECKED>(samples, discarded);
         } else {
-            self.push_block_with::<false>(samples, &mut top);
+            self.push_block_with::<false, CHECKED>(samples, discarded);
         }
     }
 
     #[inline(always)]
-    fn push_block_with<const UNIT: bool>(
+    fn push_block_with<const UNIT: bool, const CHECKED: bool>(
         &mut self,
         samples: &[f64],
-        top: &mut impl FnMut(f64, f64) -> f64,
+        mut discarded: Option<&mut ScaledSum>,
     ) {
         let (b, u, ib, limit) = (self.params.b, self.params.u, self.ib, self.limit);
         let mut over_range = self.over_range;
         let buf = &mut self.a;
-        let mut a0 = buf[0];
-        let mut a1 = buf.get(1).copied().unwrap_or_default();
+        let (mut a0, mut a1) = if CHECKED {
+            (Neumaier::new(), Neumaier::new())
+        } else {
+            (buf.plain(0).unwrap_or_default(), buf.plain(1).unwrap_or_default())
+        };
         let mut rest_of = samples.iter();
         'block: loop {
             // Runs of samples below u only touch A_0: keep that loop tight.
@@ -340,7 +443,7 @@ impl Cascade {
                 };
                 let s = if UNIT { x } else { x / u };
                 if s < 1.0 {
-                    a0.add(x);
+                    add_to::<CHECKED>(buf, &mut a0, &mut a1, 0, x);
                 } else {
                     break (x, s);
                 }
@@ -352,12 +455,15 @@ impl Cascade {
                     over_range += 1;
                 }
                 grow(buf, limit);
-                let v = top(x, u * p);
-                match j {
-                    0 => a0.add(v),
-                    1 => a1.add(v),
-                    _ => buf[j].add(v),
-                }
+                let v = match discarded.as_deref_mut() {
+                    Some(d) => {
+                        let c = u * p;
+                        d.add(x - c);
+                        c
+                    }
+                    None => x,
+                };
+                add_to::<CHECKED>(buf, &mut a0, &mut a1, j, v);
                 continue;
             }
             let a = ((p / s - ib) / (1.0 - ib)).max(0.0);
@@ -366,22 +472,25 @@ impl Cascade {
             grow(buf, j + 2);
             match j {
                 0 => {
-                    a0.add(part);
-                    a1.add(rest);
+                    add_to::<CHECKED>(buf, &mut a0, &mut a1, 0, part);
+                    add_to::<CHECKED>(buf, &mut a0, &mut a1, 1, rest);
                 }
                 1 => {
-                    a1.add(part);
-                    buf[2].add(rest);
+                    add_to::<CHECKED>(buf, &mut a0, &mut a1, 1, part);
+                    add_to::<CHECKED>(buf, &mut a0, &mut a1, 2, rest);
                 }
                 _ => {
-                    buf[j].add(part);
-                    buf[j + 1].add(rest);
+                    add_to::<CHECKED>(buf, &mut a0, &mut a1, j, part);
+                    add_to::<CHECKED>(buf, &mut a0, &mut a1, j + 1, rest);
                 }
             }
         }
-        buf[0] = a0;
-        if let Some(slot) = buf.get_mut(1) {
-            *slot = a1;
+        if !CHECKED {
+            let plain = buf.plain_mut();
+            plain[0] = a0;
+            if let Some(slot) = plain.get_mut(1) {
+                *slot = a1;
+            }
         }
         self.over_range = over_range;
         self.n += samples.len() as u64;
@@ -397,7 +506,7 @@ impl Cascade {
         let s = x / u;
         self.n += 1;
         if s < 1.0 {
-            self.a[0].add(x);
+            self.a.add(0, x);
             return Splat::Whole { j: 0 };
         }
         let (j, p) = locate(b, limit - 1, s);
@@ -408,18 +517,18 @@ impl Cascade {
             grow(&mut self.a, limit);
             if clamp_top {
                 let v = u * p;
-                self.a[j].add(v);
+                self.a.add(j, v);
                 return Splat::Clamped { j, v };
             }
-            self.a[j].add(x);
+            self.a.add(j, x);
             return Splat::Whole { j };
         }
         let a = ((p / s - ib) / (1.0 - ib)).max(0.0);
         let part = a * x;
         let rest = x - part;
         grow(&mut self.a, j + 2);
-        self.a[j].add(part);
-        self.a[j + 1].add(rest);
+        self.a.add(j, part);
+        self.a.add(j + 1, rest);
         Splat::Split { j, a }
     }
 
@@ -443,9 +552,12 @@ impl Cascade {
     fn for_each_row(&self, len: usize, mut f: impl FnMut(usize, f64, f64, f64)) {
         let nf = self.n as f64;
         let (b, u) = (self.params.b, self.params.u);
-        let buffer = |j: usize| match self.a.get(j) {
-            Some(acc) => acc.value() / nf,
-            None => 0.0,
+        let buffer = |j: usize| {
+            if j < self.a.len() {
+                self.a.mean(j, nf)
+            } else {
+                0.0
+            }
         };
         let mut p = 1.0f64;
         let mut c = u * p;
@@ -515,7 +627,7 @@ impl Cascade {
                     if rho_j <= bound {
                         w = 0.0;
                     }
-                    e += w * bj;
+                    e = saturating_add(e, w * bj);
                     record(bj, nj, rho_j, w);
                 });
             }
@@ -531,11 +643,16 @@ impl Cascade {
                     if rel >= 0.0 {
                         rel = r_loc - 1.0 / kappa;
                     }
-                    let col = e.max(floor) * nf / (kappa * cj) * colour;
+                    let mut col = e.max(floor) * nf / (kappa * cj) * colour;
+                    if !(col.is_finite() && (kappa * cj).is_finite()) {
+                        // The spec's order overflowed (E·N or κ·c_j above f64::MAX): the same
+                        // quantity in an order that does not (+inf only if it truly is).
+                        col = e.max(floor) / cj * (nf / kappa) * colour;
+                    }
                     // Not f64::clamp, which keeps NaN: a NaN weight counts as 0.
                     let half = (rel + col) / 2.0;
                     let w = if half >= 0.0 { half.min(1.0) } else { 0.0 };
-                    e += w * bj;
+                    e = saturating_add(e, w * bj);
                     record(bj, nj, rho_j, w);
                 });
             }
@@ -582,14 +699,15 @@ impl Cascade {
     }
 
     fn state_bytes(&self) -> usize {
-        self.a.capacity() * std::mem::size_of::<Neumaier>()
+        self.a.heap_bytes()
     }
 
     fn reset(&mut self) {
-        if self.params.j == CascadeSize::Auto {
-            self.a.truncate(1);
-        }
-        self.a.fill(Neumaier::new());
+        let keep = match self.params.j {
+            CascadeSize::Auto => 1,
+            CascadeSize::Fixed(_) => self.a.len(),
+        };
+        self.a.reset(keep);
         self.n = 0;
         self.over_range = 0;
     }
@@ -735,7 +853,7 @@ impl Estimator for Zirr {
     }
 
     fn push_slice(&mut self, samples: &[f64]) {
-        self.c.push_block(samples, |x, _| x);
+        self.c.push_block(samples, None);
     }
 
     fn count(&self) -> u64 {
@@ -774,7 +892,8 @@ impl Estimator for Zirr {
 #[derive(Debug, Clone)]
 pub struct ZirrRef {
     c: Cascade,
-    discarded: Neumaier,
+    /// Rescaled before it overflows, like the buffers.
+    discarded: ScaledSum,
 }
 
 impl ZirrRef {
@@ -817,7 +936,7 @@ impl ZirrRef {
         }
         Ok(ZirrRef {
             c: Cascade::new(p, limit),
-            discarded: Neumaier::new(),
+            discarded: ScaledSum::new(),
         })
     }
 
@@ -898,7 +1017,7 @@ impl ZirrRef {
         if self.c.n == 0 {
             0.0
         } else {
-            self.discarded.value() / self.c.n as f64
+            self.discarded.mean(self.c.n)
         }
     }
 }
@@ -918,11 +1037,7 @@ impl Estimator for ZirrRef {
     }
 
     fn push_slice(&mut self, samples: &[f64]) {
-        let discarded = &mut self.discarded;
-        self.c.push_block(samples, |x, c| {
-            discarded.add(x - c);
-            c
-        });
+        self.c.push_block(samples, Some(&mut self.discarded));
     }
 
     fn count(&self) -> u64 {
@@ -952,7 +1067,7 @@ impl Estimator for ZirrRef {
 
     fn reset(&mut self) {
         self.c.reset();
-        self.discarded = Neumaier::new();
+        self.discarded = ScaledSum::new();
     }
 }
 

@@ -1,7 +1,7 @@
 //! Acceptance bookkeeping shared by the three Pajot estimators: the running sum of accepted
 //! samples and the sorted list of samples the method still has to remember.
 
-use crate::estimators::Neumaier;
+use crate::estimators::numeric::ScaledSum;
 
 /// The accepted sum and the kept list.
 ///
@@ -15,10 +15,11 @@ use crate::estimators::Neumaier;
 /// monotone, so ascending values are ascending logs.
 #[derive(Debug, Clone)]
 pub(super) struct Ledger {
-    /// Compensated sum of the accepted samples.
-    pub(super) sum: Neumaier,
+    /// Compensated sum of the accepted samples, rescaled before it would overflow (so the mean
+    /// of accepted samples near `f64::MAX` stays finite).
+    sum: ScaledSum,
     /// Number of accepted samples, black ones included.
-    pub(super) accepted: u64,
+    accepted: u64,
     kept: Vec<f64>,
     summed: usize,
     cap: usize,
@@ -29,7 +30,7 @@ impl Ledger {
     /// An empty ledger keeping at most `cap` entries (`usize::MAX`: unbounded).
     pub(super) fn new(cap: usize) -> Self {
         Ledger {
-            sum: Neumaier::new(),
+            sum: ScaledSum::new(),
             accepted: 0,
             kept: Vec::new(),
             summed: 0,
@@ -40,7 +41,7 @@ impl Ledger {
 
     /// Forgets every sample, keeping the cap and the list's allocation.
     pub(super) fn clear(&mut self) {
-        self.sum = Neumaier::new();
+        self.sum = ScaledSum::new();
         self.accepted = 0;
         self.kept.clear();
         self.summed = 0;
@@ -90,7 +91,7 @@ impl Ledger {
         if self.accepted == 0 {
             0.0
         } else {
-            self.sum.value() / self.accepted as f64
+            self.sum.mean(self.accepted)
         }
     }
 
