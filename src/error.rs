@@ -179,7 +179,21 @@ macro_rules! display_param_value {
     )*};
 }
 display_param_value!(
-    u8, u16, u32, u64, u128, usize, i8, i16, i32, i64, i128, isize, str, String, Num,
+    u8,
+    u16,
+    u32,
+    u64,
+    u128,
+    usize,
+    i8,
+    i16,
+    i32,
+    i64,
+    i128,
+    isize,
+    str,
+    String,
+    Num,
     std::path::Display<'_>
 );
 

@@ -129,8 +129,19 @@ mod tests {
         assert_eq!(MemoryLimit::parse("m", "512MiB").unwrap().0, 512 << 20);
         assert_eq!(MemoryLimit::parse("m", "1.5T").unwrap().0, 3 << 39);
         assert_eq!(MemoryLimit::parse("m", " 24 gb ").unwrap().0, 24 << 30);
-        for bad in ["", "G", "-1G", "0", "1e3", "12 parsecs", "99999999999T", "nan"] {
-            let e = MemoryLimit::parse("max-memory", bad).unwrap_err().to_string();
+        for bad in [
+            "",
+            "G",
+            "-1G",
+            "0",
+            "1e3",
+            "12 parsecs",
+            "99999999999T",
+            "nan",
+        ] {
+            let e = MemoryLimit::parse("max-memory", bad)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains("max-memory"), "{bad}: {e}");
         }
     }
@@ -139,7 +150,10 @@ mod tests {
     fn plans_above_the_limit_are_refused_with_both_sizes() {
         let limit = MemoryLimit(1 << 30);
         assert!(limit.check("x", 1 << 30).is_ok());
-        let e = limit.check("trials = 7", (1 << 30) + 1).unwrap_err().to_string();
+        let e = limit
+            .check("trials = 7", (1 << 30) + 1)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("trials = 7") && e.contains("1.0 GiB") && e.contains("--max-memory"));
     }
 
@@ -156,6 +170,9 @@ mod tests {
         assert_eq!(shorten("a\0b"), "a\\0b");
         let long = "x".repeat(1000);
         let s = shorten(&long);
-        assert!(s.starts_with(&"x".repeat(40)) && s.ends_with("(1000 bytes)"), "{s}");
+        assert!(
+            s.starts_with(&"x".repeat(40)) && s.ends_with("(1000 bytes)"),
+            "{s}"
+        );
     }
 }

@@ -26,7 +26,11 @@ fn refused(out: &Output, needles: &[&str]) -> String {
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert_eq!(out.status.code(), Some(2), "stderr: {stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
-    assert!(stderr.len() < 2000, "message too long: {} bytes", stderr.len());
+    assert!(
+        stderr.len() < 2000,
+        "message too long: {} bytes",
+        stderr.len()
+    );
     for n in needles {
         assert!(stderr.contains(n), "missing {n:?} in: {stderr}");
     }
@@ -112,11 +116,24 @@ fn estimator_state_counts_against_the_memory_limit() {
             .output()
             .unwrap()
     };
-    let e = refused(&render("1GiB"), &["mon:M=1048576", "1.0 GiB", "--max-memory"]);
-    assert!(e.contains("12.0 GiB") || e.contains("needs at least 12"), "{e}");
+    let e = refused(
+        &render("1GiB"),
+        &["mon:M=1048576", "1.0 GiB", "--max-memory"],
+    );
+    assert!(
+        e.contains("12.0 GiB") || e.contains("needs at least 12"),
+        "{e}"
+    );
     let out = bin()
         .env("FIREFLIES_MAX_MEMORY", "1GiB")
-        .args(["render", "--spp", "1", "--estimators", "mon:M=1048576", "--out"])
+        .args([
+            "render",
+            "--spp",
+            "1",
+            "--estimators",
+            "mon:M=1048576",
+            "--out",
+        ])
         .arg(dir.join("out"))
         .arg(&file)
         .output()
@@ -183,11 +200,16 @@ fn thread_counts_are_capped() {
 #[test]
 fn experiment_names_cannot_leave_the_reports_directory() {
     let dir = scratch("names");
-    for name in ["../escaped", "/tmp/abs-escaped", "a/b", "..", ".", "", " padded"] {
-        let file = write(
-            &dir.join("e.toml"),
-            &experiment(name, "[4]", "[\"mean\"]"),
-        );
+    for name in [
+        "../escaped",
+        "/tmp/abs-escaped",
+        "a/b",
+        "..",
+        ".",
+        "",
+        " padded",
+    ] {
+        let file = write(&dir.join("e.toml"), &experiment(name, "[4]", "[\"mean\"]"));
         let out = bin()
             .current_dir(&dir)
             .arg("run")
@@ -273,15 +295,27 @@ fn merge_names_the_mismatched_seed() {
     for (seed, i) in [(1, 0), (2, 1)] {
         let file = write(
             &dir.join(format!("e{seed}.toml")),
-            &experiment("probe", "[4]", "[\"mean\"]").replace("seed = 1", &format!("seed = {seed}")),
+            &experiment("probe", "[4]", "[\"mean\"]")
+                .replace("seed = 1", &format!("seed = {seed}")),
         );
         let out = bin()
-            .args(["run", "--trials", "4096", "--shard", &format!("{i}/2"), "--out"])
+            .args([
+                "run",
+                "--trials",
+                "4096",
+                "--shard",
+                &format!("{i}/2"),
+                "--out",
+            ])
             .arg(dir.join("shards"))
             .arg(&file)
             .output()
             .unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
     }
     let out = bin()
         .args(["merge", "--out"])

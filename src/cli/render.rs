@@ -80,7 +80,11 @@ fn parse_pixels(text: &str) -> Result<Vec<(u32, u32)>> {
                         Error::param(
                             "dump-pixels",
                             &shown,
-                            format!("{axis} = {} is out of range (at most {})", shorten(c), u32::MAX),
+                            format!(
+                                "{axis} = {} is out of range (at most {})",
+                                shorten(c),
+                                u32::MAX
+                            ),
                         )
                     })
                 } else {

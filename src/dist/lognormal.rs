@@ -9,7 +9,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::TruncatedMoments;
 use super::special::{ln_norm_cdf, norm_cdf, norm_sf};
-use crate::error::{Error, Result, Num};
+use crate::error::{Error, Num, Result};
 
 /// `S = exp(mu + sigma Z)` with `Z` standard normal.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -175,7 +175,12 @@ impl LogNormal {
 
 impl fmt::Display for LogNormal {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "lognormal(mu={},sigma={})", Num(self.mu), Num(self.sigma))
+        write!(
+            f,
+            "lognormal(mu={},sigma={})",
+            Num(self.mu),
+            Num(self.sigma)
+        )
     }
 }
 

@@ -8,7 +8,7 @@ use rand_distr::Distribution;
 
 use super::special::unit_f64;
 use super::{Dist, TruncatedMoments};
-use crate::error::{Error, Result, Num};
+use crate::error::{Error, Num, Result};
 
 /// `S = S_i` with probability `w_i`.
 ///

@@ -13,7 +13,7 @@ use rand_distr::{Distribution, Exp1};
 
 use super::special::{integrate, unit_f64};
 use super::{TruncatedMoments, check_positive_finite};
-use crate::error::{Error, Result, Num};
+use crate::error::{Error, Num, Result};
 
 /// Pareto law `P(S > x) = (scale / x)^shape` for `x >= scale`, with `shape > 1` so that its
 /// mean — the truth every estimator's bias is measured against — is finite. Its variance is
@@ -137,7 +137,12 @@ impl Pareto {
 
 impl fmt::Display for Pareto {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "pareto(scale={},shape={})", Num(self.scale), Num(self.shape))
+        write!(
+            f,
+            "pareto(scale={},shape={})",
+            Num(self.scale),
+            Num(self.shape)
+        )
     }
 }
 

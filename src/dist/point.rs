@@ -8,7 +8,7 @@ use rand::Rng;
 use rand_distr::Distribution;
 
 use super::TruncatedMoments;
-use crate::error::{Error, Result, Num};
+use crate::error::{Error, Num, Result};
 
 /// All probability at `value`.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -64,7 +64,13 @@ fn first_difference<'a>(a: &'a str, b: &'a str) -> (usize, &'a str, &'a str) {
         match (la.next(), lb.next()) {
             (Some(x), Some(y)) if x == y => continue,
             (None, None) => return (line, "", ""),
-            (x, y) => return (line, x.unwrap_or("(end of file)"), y.unwrap_or("(end of file)")),
+            (x, y) => {
+                return (
+                    line,
+                    x.unwrap_or("(end of file)"),
+                    y.unwrap_or("(end of file)"),
+                );
+            }
         }
     }
     unreachable!("the loop returns at the first difference")
@@ -177,7 +183,10 @@ pub fn merge(files: &[PathBuf]) -> Result<(Experiment, RunOutput)> {
         if let Some(other) = seen.insert(index, path) {
             return Err(Error::Io {
                 path: path.display().to_string(),
-                message: format!("duplicated shard {index}/{count}: also in {}", other.display()),
+                message: format!(
+                    "duplicated shard {index}/{count}: also in {}",
+                    other.display()
+                ),
             });
         }
     }

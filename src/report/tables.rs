@@ -1,7 +1,7 @@
 //! Tables of a run: the tidy `results.csv` (one row per distribution, estimator, n and
 //! metric), the readable `summary.md`, and `manifest.json` with what produced them.
 
-use crate::error::{Error, Result, Num};
+use crate::error::{Error, Num, Result};
 use crate::harness::metrics::{CellMetrics, Interval};
 use crate::harness::{CheckResult, Experiment, RunOutput};
 use serde::Serialize;
