@@ -16,8 +16,8 @@ use std::fmt;
 /// Largest accepted M: a pixel's state is 16 bytes a set, so this caps it at 16 MiB.
 pub const MAX_SETS: usize = 1 << 20;
 
-/// Most sets one unchecked block loop may touch: their undo copy (16 bytes a set, 4 KiB)
-/// lives on the stack.
+/// Most sets whose undo copy (16 bytes a set, 4 KiB) [`Partition::push_slice`] keeps on the
+/// stack; more sets are copied to the heap, once per block of at least one round.
 const UNCHECKED_SETS: usize = 256;
 
 /// Round-robin partition of a stream into M sets, each a compensated sum.
@@ -71,54 +71,63 @@ impl Partition {
 
     /// Adds a block; same result as pushing one by one.
     ///
-    /// The block runs the plain compensated sums with no per-sample test, then checks each set
-    /// it touched once: sums of non-negative samples never decrease, so a set below the limit
-    /// at the end never passed it. If one did, the block is undone (from a copy of the touched
-    /// sets, kept on the stack) and pushed sample by sample, which rescales that set. With
-    /// more than [`UNCHECKED_SETS`] sets, pieces of that many samples go through in turn.
+    /// The sums are checked once per block, not per sample, so the loop stays the plain
+    /// (vectorized) compensated sum. A block shorter than one round adds one sample to each set
+    /// it touches, and is checked before it runs. A longer block runs first and checks each
+    /// set once at the end: sums of non-negative samples never decrease, so a set below the
+    /// limit at the end never passed it. In the rare case one did, the block is undone from a
+    /// copy of the sets (on the stack up to 256 sets) and pushed sample by sample, which
+    /// rescales that set.
     pub fn push_slice(&mut self, samples: &[f64]) {
-        if samples.len() < self.sums.len() {
-            // Each set touched gets one sample: one comparison per addition costs less than
-            // the undo copy would.
-            samples.iter().for_each(|&s| self.push(s));
-        } else if self.sums.any_scaled() {
+        let m = self.sums.len();
+        if self.sums.any_scaled() {
             self.push_each(samples);
-        } else if self.sums.len() <= UNCHECKED_SETS {
-            self.push_piece(samples);
+        } else if samples.len() < m {
+            self.push_short(samples);
+        } else if m <= UNCHECKED_SETS {
+            let mut before = ArrayVec::<Neumaier, UNCHECKED_SETS>::new();
+            match before.try_extend_from_slice(self.sums.plain_mut()) {
+                Ok(()) => self.push_rounds(samples, &before),
+                Err(_) => self.push_each(samples),
+            }
         } else {
-            samples
-                .chunks(UNCHECKED_SETS)
-                .for_each(|piece| self.push_piece(piece));
+            let before = self.sums.plain_mut().to_vec();
+            self.push_rounds(samples, &before);
         }
     }
 
-    /// [`Partition::push_slice`] for a block that touches at most [`UNCHECKED_SETS`] sets.
-    fn push_piece(&mut self, samples: &[f64]) {
-        if !self.sums.any_scaled() {
-            let (start, m) = (self.cursor, self.sums.len());
-            // The sets the block touches, in turn from the cursor: `first`, then `second`
-            // after wrapping around (empty unless the block reaches the last set).
-            let end = start + samples.len().min(m);
-            let (first, second) = (start..end.min(m), 0..end.saturating_sub(m));
-            let sums = self.sums.plain_mut();
-            let mut before = ArrayVec::<Neumaier, UNCHECKED_SETS>::new();
-            let saved = before.try_extend_from_slice(&sums[first.clone()]).is_ok()
-                && (second.is_empty() || before.try_extend_from_slice(&sums[second.clone()]).is_ok());
-            if saved {
-                Self::push_unchecked(sums, &mut self.cursor, samples);
-                let fits = |range: std::ops::Range<usize>| {
-                    sums[range].iter().fold(true, |ok, s| ok & s.below_limit())
-                };
-                if fits(first.clone()) && (second.is_empty() || fits(second.clone())) {
-                    self.n += samples.len() as u64;
-                    return;
-                }
-                let (a, b) = before.split_at(first.len());
-                sums[first].copy_from_slice(a);
-                sums[second].copy_from_slice(b);
-                self.cursor = start;
-            }
+    /// [`Partition::push_slice`] for a block shorter than one round: each set it touches gets
+    /// exactly one sample, so checking every `s + x` first (a branch-free pass) proves the plain
+    /// loop safe, for less than an undo copy would cost.
+    fn push_short(&mut self, samples: &[f64]) {
+        let (start, m) = (self.cursor, self.sums.len());
+        let first = (m - start).min(samples.len());
+        let sums = self.sums.plain_mut();
+        let fits = |accs: &[Neumaier], xs: &[f64]| {
+            accs.iter()
+                .zip(xs)
+                .fold(true, |ok, (acc, &x)| ok & acc.fits_with(x))
+        };
+        if fits(&sums[start..], &samples[..first]) & fits(sums, &samples[first..]) {
+            Self::push_unchecked(sums, &mut self.cursor, samples);
+            self.n += samples.len() as u64;
+        } else {
+            self.push_each(samples);
         }
+    }
+
+    /// [`Partition::push_slice`] for a block of at least one round, given a copy of every set
+    /// to undo it from.
+    fn push_rounds(&mut self, samples: &[f64], before: &[Neumaier]) {
+        let cursor = self.cursor;
+        let sums = self.sums.plain_mut();
+        Self::push_unchecked(sums, &mut self.cursor, samples);
+        if sums.iter().fold(true, |ok, acc| ok & acc.below_limit()) {
+            self.n += samples.len() as u64;
+            return;
+        }
+        sums.copy_from_slice(before);
+        self.cursor = cursor;
         self.push_each(samples);
     }
 

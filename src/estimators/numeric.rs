@@ -15,14 +15,16 @@
 //! The common case costs nothing per term where it matters: the estimators' block loops add
 //! with the plain [`Neumaier::add`] and check afterwards that the running sums stayed below
 //! the limit (sums of non-negative terms never decrease, so a final value below the limit
-//! proves that no partial sum reached it); only when that check fails, or for single pushes,
-//! is each addition checked, with one comparison.
+//! proves that no partial sum reached it), undoing the block from a copy in the rare case one
+//! did; a MoN block shorter than one round, which adds one term to each sum it touches,
+//! checks each `s + x` before instead. Single pushes check each addition, with one
+//! comparison.
 
 /// Plain running sums are kept below this magnitude, `2^1023`; see the module docs.
-pub(crate) const SUM_LIMIT: f64 = f64::from_bits(0x7FE0_0000_0000_0000);
+const SUM_LIMIT: f64 = f64::from_bits(0x7FE0_0000_0000_0000);
 
 /// A rescaled sum holds its terms times `2^-SUM_SHIFT`.
-pub(crate) const SUM_SHIFT: i32 = 128;
+const SUM_SHIFT: i32 = 128;
 
 /// `2^-SUM_SHIFT`.
 const SUM_DOWN: f64 = f64::from_bits(((1023 - SUM_SHIFT) as u64) << 52);
@@ -79,6 +81,13 @@ impl Neumaier {
         }
         self.step(t, x);
         true
+    }
+
+    /// Whether [`Neumaier::add`]`(x)` would keep the running sum below [`SUM_LIMIT`] in
+    /// magnitude (the test of [`Neumaier::try_add`], without the addition).
+    #[inline(always)]
+    pub(crate) fn fits_with(&self, x: f64) -> bool {
+        (self.sum + x).abs() < SUM_LIMIT
     }
 
     /// Whether the running sum is below [`SUM_LIMIT`] in magnitude (false once it overflowed).
@@ -162,15 +171,18 @@ impl ScaledSum {
     #[inline(always)]
     pub(crate) fn add_all(&mut self, terms: impl Iterator<Item = f64> + Clone) {
         if !self.scaled {
-            // On a copy, so that the rare undo is just not storing it.
-            let mut acc = self.acc;
+            // The undo copy is taken field by field (black_box keeps the compiler from merging
+            // the two loads): one 16-byte load of a pair that the previous block stored as two
+            // 8-byte halves would stall on store forwarding, a cost short blocks notice.
+            let sum = std::hint::black_box(self.acc.sum);
+            let compensation = std::hint::black_box(self.acc.compensation);
             for x in terms.clone() {
-                acc.add(x);
+                self.acc.add(x);
             }
-            if acc.below_limit() {
-                self.acc = acc;
+            if self.acc.below_limit() {
                 return;
             }
+            self.acc = Neumaier { sum, compensation };
         }
         self.add_each(terms);
     }
@@ -244,15 +256,21 @@ impl ScaledSums {
     /// Adds one finite term of any sign to sum `i`; one comparison beyond the plain addition.
     #[inline(always)]
     pub(crate) fn add(&mut self, i: usize, x: f64) {
-        if self.scaled.is_empty() {
-            if self.sums[i].try_add(x) {
-                return;
-            }
-            self.scaled = vec![false; self.sums.len()];
-        } else if !self.scaled[i] && self.sums[i].try_add(x) {
-            return;
+        if !(self.scaled.is_empty() && self.sums[i].try_add(x)) {
+            self.add_slow(i, x);
         }
-        self.sums[i].add_scaled(&mut self.scaled[i], x);
+    }
+
+    /// [`ScaledSums::add`] once some sum is rescaled or this one must be.
+    #[cold]
+    #[inline(never)]
+    fn add_slow(&mut self, i: usize, x: f64) {
+        if self.scaled.is_empty() {
+            self.scaled = vec![false; self.sums.len()];
+        }
+        if self.scaled[i] || !self.sums[i].try_add(x) {
+            self.sums[i].add_scaled(&mut self.scaled[i], x);
+        }
     }
 
     /// Sum `i` divided by `count` (`count > 0`), as [`ScaledSum::mean`].

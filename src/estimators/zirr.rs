@@ -432,7 +432,10 @@ impl Cascade {
         let (mut a0, mut a1) = if CHECKED {
             (Neumaier::new(), Neumaier::new())
         } else {
-            (buf.plain(0).unwrap_or_default(), buf.plain(1).unwrap_or_default())
+            (
+                buf.plain(0).unwrap_or_default(),
+                buf.plain(1).unwrap_or_default(),
+            )
         };
         let mut rest_of = samples.iter();
         'block: loop {
