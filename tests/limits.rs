@@ -325,3 +325,16 @@ fn merge_names_the_mismatched_seed() {
         .unwrap();
     refused(&out, &["the seed is 2 here but 1 in"]);
 }
+
+/// Item 11: `zirr-ref:J=0` suggested `auto`, which zirr-ref does not take.
+#[test]
+fn zirr_ref_messages_do_not_suggest_auto() {
+    for spec in ["zirr-ref:J=0", "zirr-ref:J=1"] {
+        let e = spec
+            .parse::<fireflies::EstimatorSpec>()
+            .and_then(|s| s.build().map(|_| ()))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("J") && e.contains("2..=") && !e.contains("auto"), "{e}");
+    }
+}

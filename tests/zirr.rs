@@ -557,7 +557,7 @@ fn parameter_errors_name_parameter_and_value() {
         j: CascadeSize::Fixed(1),
         ..r
     });
-    assert!(e.contains("J = 1") && e.contains("at least 2"), "{e}");
+    assert!(e.contains("J = 1") && e.contains("2..=4096"), "{e}");
     let e = err_ref(ZirrParams {
         kappa_min: 2.0,
         ..r

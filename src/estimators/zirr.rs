@@ -903,7 +903,7 @@ impl ZirrRef {
     /// Checked constructor: as [`Zirr::new`], and moreover `J` fixed and at least 2,
     /// `kappa_min = 1`, and `u·b^(J−1)` finite. Never panics.
     pub fn new(p: ZirrParams) -> Result<Self> {
-        let limit = check_common(&p)?;
+        // zirr-ref's own rules on J come first, so its messages never suggest `auto`.
         let CascadeSize::Fixed(j) = p.j else {
             return Err(Error::param(
                 "J",
@@ -912,8 +912,13 @@ impl ZirrRef {
             ));
         };
         if j < 2 {
-            return Err(Error::param("J", j, "must be at least 2 for zirr-ref"));
+            return Err(Error::param(
+                "J",
+                j,
+                format!("zirr-ref needs an integer J in 2..={MAX_BUFFERS}"),
+            ));
         }
+        let limit = check_common(&p)?;
         if p.kappa_min != 1.0 {
             return Err(Error::param(
                 "kappa_min",
