@@ -335,6 +335,9 @@ fn zirr_ref_messages_do_not_suggest_auto() {
             .and_then(|s| s.build().map(|_| ()))
             .unwrap_err()
             .to_string();
-        assert!(e.contains("J") && e.contains("2..=") && !e.contains("auto"), "{e}");
+        assert!(
+            e.contains("J") && e.contains("2..=") && !e.contains("auto"),
+            "{e}"
+        );
     }
 }
