@@ -21,6 +21,17 @@ fn write(path: &Path, text: &str) -> PathBuf {
     path.to_path_buf()
 }
 
+/// Runs `fireflies ARGS --out DIR/out INPUT`.
+fn with_out(dir: &Path, args: &[&str], input: &Path) -> Output {
+    bin()
+        .args(args)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .arg(input)
+        .output()
+        .unwrap()
+}
+
 /// Asserts a usage error (exit 2, no panic) whose message contains every `needle`.
 fn refused(out: &Output, needles: &[&str]) -> String {
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
@@ -71,12 +82,7 @@ fn scene(width: &str, height: &str) -> String {
 fn a_small_scene_renders_so_the_refusals_below_are_about_size() {
     let dir = scratch("small");
     let file = write(&dir.join("s.xml"), &scene("16", "16"));
-    let out = bin()
-        .args(["render", "--spp", "2", "--out"])
-        .arg(dir.join("out"))
-        .arg(&file)
-        .output()
-        .unwrap();
+    let out = with_out(&dir, &["render", "--spp", "2"], &file);
     assert!(
         out.status.success(),
         "{}",
@@ -91,12 +97,7 @@ fn huge_films_are_refused_before_allocation() {
     let dir = scratch("films");
     for (w, h) in [("65536", "65537"), ("100000000", "100000000")] {
         let file = write(&dir.join(format!("{w}x{h}.xml")), &scene(w, h));
-        let out = bin()
-            .args(["render", "--spp", "1", "--out"])
-            .arg(dir.join("out"))
-            .arg(&file)
-            .output()
-            .unwrap();
+        let out = with_out(&dir, &["render", "--spp", "1"], &file);
         refused(&out, &[&format!("film of {w}x{h} pixels"), "--max-memory"]);
     }
 }
@@ -151,23 +152,13 @@ fn runs_that_cannot_fit_are_refused_naming_the_parameter() {
         &dir.join("small.toml"),
         &experiment("small", "[4, 16]", "[\"mean\"]"),
     );
-    let out = bin()
-        .args(["run", "--trials", "1000000000000", "--out"])
-        .arg(dir.join("out"))
-        .arg(&small)
-        .output()
-        .unwrap();
+    let out = with_out(&dir, &["run", "--trials", "1000000000000"], &small);
     refused(&out, &["trials = 1000000000000", "--max-memory"]);
     let big = write(
         &dir.join("big.toml"),
         &experiment("big", "[4, 10000000000]", "[\"mean\"]"),
     );
-    let out = bin()
-        .args(["run", "--out"])
-        .arg(dir.join("out"))
-        .arg(&big)
-        .output()
-        .unwrap();
+    let out = with_out(&dir, &["run"], &big);
     refused(&out, &["largest checkpoint = 10000000000", "--max-memory"]);
 }
 
@@ -179,20 +170,10 @@ fn thread_counts_are_capped() {
         &dir.join("small.toml"),
         &experiment("small", "[4]", "[\"mean\"]"),
     );
-    let out = bin()
-        .args(["run", "--threads", "18446744073709551615", "--out"])
-        .arg(dir.join("out"))
-        .arg(&small)
-        .output()
-        .unwrap();
+    let out = with_out(&dir, &["run", "--threads", "18446744073709551615"], &small);
     refused(&out, &["threads", "1024"]);
     let file = write(&dir.join("s.xml"), &scene("4", "4"));
-    let out = bin()
-        .args(["render", "--threads", "5000", "--out"])
-        .arg(dir.join("out"))
-        .arg(&file)
-        .output()
-        .unwrap();
+    let out = with_out(&dir, &["render", "--threads", "5000"], &file);
     refused(&out, &["threads", "1024"]);
 }
 
@@ -264,27 +245,12 @@ fn render_options_are_checked() {
     let dir = scratch("options");
     let file = write(&dir.join("s.xml"), &scene("4", "4"));
     for exposure in ["nan", "inf", "0", "-1"] {
-        let out = bin()
-            .args(["render", &format!("--exposure={exposure}"), "--out"])
-            .arg(dir.join("out"))
-            .arg(&file)
-            .output()
-            .unwrap();
+        let out = with_out(&dir, &["render", &format!("--exposure={exposure}")], &file);
         refused(&out, &["exposure"]);
     }
-    let out = bin()
-        .args(["render", "--dump-pixels", "99999999999,1", "--out"])
-        .arg(dir.join("out"))
-        .arg(&file)
-        .output()
-        .unwrap();
+    let out = with_out(&dir, &["render", "--dump-pixels", "99999999999,1"], &file);
     refused(&out, &["x = 99999999999 is out of range"]);
-    let out = bin()
-        .args(["render", "--dump-pixels", "9,1", "--out"])
-        .arg(dir.join("out"))
-        .arg(&file)
-        .output()
-        .unwrap();
+    let out = with_out(&dir, &["render", "--dump-pixels", "9,1"], &file);
     refused(&out, &["9,1", "outside the 4x4 image"]);
 }
 
