@@ -1,4 +1,4 @@
-//! Hard numerical cases for the mean, clamp, MoN family and Jung (spec §1–§4): extreme
+//! Hard numerical cases for the mean, clamp, MoN family and Jung (docs/estimators.md §1–§4): extreme
 //! magnitudes, degenerate streams (all zeros, one sample, n < M, n not divisible by M), long
 //! streams where compensated summation matters, a single enormous outlier, empty streams and
 //! reset. Expected values are worked out by hand in the comments, not taken from the crate.
@@ -53,7 +53,7 @@ const ALL: &[&str] = &[
 
 #[test]
 fn decimal_values_near_1e300() {
-    // Pattern (1, 1, 1, 5) x 1e300, 250 times: n = 1000, n * max = 5e303 < 1e307 (spec §1).
+    // Pattern (1, 1, 1, 5) x 1e300, 250 times: n = 1000, n * max = 5e303 < 1e307 (docs/estimators.md §1).
     // M = 4 puts each position in its own set: theta = (1, 1, 1, 5)e300.
     // MoN = 1e300; mean = 2e300; s1 = 8, s2 = 1 + 2 + 3 + 20 = 26, G = 52/32 - 5/4 = 0.375;
     // G-MoN: k = 2, c = floor(0.75) = 0 -> mean of set means 2e300; G-MoN_b(0.25) -> MoN.
@@ -114,7 +114,7 @@ fn running_example_scaled_near_1e300_and_1e_minus_300() {
 
 #[test]
 fn jung_follows_the_spec_welford_literally_at_extreme_scales() {
-    // Spec §1: sigma = sqrt(m2/k), "+inf if m2 overflows"; spec §4: ratio = +inf gives M_max.
+    // docs/estimators.md §1: sigma = sqrt(m2/k), "+inf if m2 overflows"; docs/estimators.md §4: ratio = +inf gives M_max.
     // Near 1e300 every d*(x - mean) overflows, so sigma_pixel = +inf and M = m_max = 17
     // (MoN(17) of 7 samples = 2.2 * s), although the scaled ratio is the example's 3.04.
     let s = 2f64.powi(995);
@@ -202,7 +202,7 @@ fn subnormal_samples_are_summed_exactly() {
 #[test]
 fn all_zeros() {
     let mut xs = vec![0.0; 100];
-    xs[17] = -0.0; // a valid zero too (spec §1)
+    xs[17] = -0.0; // a valid zero too (docs/estimators.md §1)
     for &spec in ALL {
         let e = run(spec, &xs);
         assert_eq!(e.estimate().unwrap(), 0.0, "{spec}");
@@ -267,7 +267,7 @@ fn fewer_samples_than_sets_uses_k_equal_n() {
     let g = run("gmon:M=100", &xs);
     assert_eq!(extra(g.as_ref(), "trimmed"), Some(Extra::Int(4)));
 
-    // Jung: M = 17 chosen but n = 7, so K = 7 (spec §4): the example's 2.2.
+    // Jung: M = 17 chosen but n = 7, so K = 7 (docs/estimators.md §4): the example's 2.2.
     assert_rel(est("jung:sigma_image=0.5", &S), 2.2, REL);
 }
 
@@ -404,7 +404,7 @@ fn one_1e30_outlier_among_a_million_ones() {
     );
 }
 
-// Image mode of Jung (spec §4) -----------------------------------------------------------------------
+// Image mode of Jung (docs/estimators.md §4) -----------------------------------------------------------------------
 
 #[test]
 fn jung_with_a_black_image() {
@@ -525,7 +525,7 @@ fn gmonb_threshold_is_inclusive() {
 #[test]
 fn gini_of_equal_set_means_is_clamped_to_zero() {
     // theta = (0.7, 0.7): s1 = 1.4, s2 = 2.1, and in f64 (2*2.1)/(2*1.4) - 3/2 = -2.2e-16.
-    // Spec §3: G = max(G, 0), so the diagnostic reports exactly 0, never a negative value.
+    // docs/estimators.md §3: G = max(G, 0), so the diagnostic reports exactly 0, never a negative value.
     let (s1, s2) = (0.7 + 0.7, 1.0 * 0.7 + 2.0 * 0.7);
     assert!(
         (2.0 * s2) / (2.0 * s1) - 1.5 < 0.0,

@@ -261,11 +261,11 @@ fn single_samples_at_f64_max() {
         } else if spec.starts_with("gini") {
             assert_eq!(e, 0.0, "{spec}: one set");
         } else if spec.starts_with("pajot") || *spec == "zirr" {
-            // Spec §6.1: a value is trusted only once a similar one corroborates it. §5: a lone
+            // docs/estimators.md §6.1: a value is trusted only once a similar one corroborates it. §5: a lone
             // sample counts 1 = kappa_min and is rejected.
             assert_eq!(e, 0.0, "{spec}");
         } else {
-            // Fixed cascades let a lone sample above the top pass (spec §5, consequence (i));
+            // Fixed cascades let a lone sample above the top pass (docs/estimators.md §5, consequence (i));
             // kappa_min = 0 keeps it; zirr-ref weighs it down.
             assert!((0.0..=f64::MAX).contains(&e), "{spec}: {e:e}");
         }
@@ -286,7 +286,7 @@ fn fewer_samples_than_sets() {
         }
     }
     // Distinct values, n = 50 not a multiple of 21 (sets of 3 and 2): the oracle is the same
-    // stream scaled down. Jung is left out: spec §1's Welford σ overflows at this scale (see
+    // stream scaled down. Jung is left out: docs/estimators.md §1's Welford σ overflows at this scale (see
     // `jung_keeps_the_spec_welford`).
     let xs: Vec<f64> = (0..50)
         .map(|i| f64::MAX * (1.0 - i as f64 / 64.0))
@@ -341,7 +341,7 @@ fn a_mix_of_1e308_and_1e_300() {
 
 #[test]
 fn jung_keeps_the_spec_welford() {
-    // Spec §1 defines sigma as +inf once m2 overflows, and tests/hard_cases.rs pins that Jung
+    // docs/estimators.md §1 defines sigma as +inf once m2 overflows, and tests/hard_cases.rs pins that Jung
     // follows it: M = m_max. The estimate, MoN(m_max), is finite all the same: here each of
     // the 17 sets holds two samples of f64::MAX and two zeros, whose sum overflowed.
     let xs: Vec<f64> = (0..68)
@@ -514,7 +514,7 @@ fn scale() -> impl Strategy<Value = i32> {
 }
 
 /// The estimators for which scaling the samples (and `c`, `u`) by `2^k` scales the estimate
-/// by exactly `2^k` (Gini: leaves it unchanged). Not Jung: spec §1's Welford squares the
+/// by exactly `2^k` (Gini: leaves it unchanged). Not Jung: docs/estimators.md §1's Welford squares the
 /// deviations, which overflow (sigma = +inf, M = m_max) or underflow (sigma = 0, M = 1) at
 /// extreme scales, so its M, and the estimate, can change. Not Pajot: its decisions compare
 /// rounded logarithms (`ln(2^k x) = k ln 2 + ln x` only up to rounding).

@@ -4,9 +4,9 @@
 //!
 //! One partition per odd `M` in `1..=m_max` is kept so the choice can be made at estimate
 //! time, when the pixel's spread is known. Image mode ([`Jung::set_sigma_image`]) lets a
-//! renderer feed the running spread of all samples of the image (spec §4).
+//! renderer feed the running spread of all samples of the image (docs/estimators.md §4).
 //!
-//! Overflow: `σ_pixel` is spec §1's Welford literally, `+inf` once its squared deviations
+//! Overflow: `σ_pixel` is docs/estimators.md §1's Welford literally, `+inf` once its squared deviations
 //! overflow (samples spread over more than about `1e154`), which selects `M = m_max`
 //! (`tests/hard_cases.rs` pins this). The sets' sums are rescaled before they overflow (see
 //! [`Partition`]), so the estimate itself is finite for any finite samples.
@@ -29,7 +29,7 @@ pub struct Jung {
     partitions: Vec<Partition>,
 }
 
-/// Jung's M for a pixel spread and an image spread (spec §4), `q` taken from the binary
+/// Jung's M for a pixel spread and an image spread (docs/estimators.md §4), `q` taken from the binary
 /// exponent of the ratio so no rounded logarithm can move a boundary.
 pub fn jung_m(sigma_pixel: f64, sigma_image: f64, m_max: usize) -> usize {
     if sigma_image == 0.0 {

@@ -2,7 +2,7 @@
 //!
 //! Every estimator is a small struct with a checked constructor, fed one sample stream through
 //! [`Estimator::push`]/[`Estimator::push_slice`] and read at any time through
-//! [`Estimator::estimate`]. The contract, with worked examples, is `spec/estimators.md`.
+//! [`Estimator::estimate`]. The contract, with worked examples, is `docs/estimators.md`.
 //!
 //! Samples are validated once, at the boundary ([`Bank`], the command line, the film); the
 //! estimators themselves assume finite, non-negative input. This module does no I/O, draws no

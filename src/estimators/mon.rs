@@ -4,7 +4,7 @@
 //!
 //! Samples are dealt round-robin into M sets (sample `i` to set `i mod M`); each set keeps only
 //! a compensated sum, since its count follows from n. Everything else happens at estimate time
-//! on the `K = min(n, M)` non-empty set means. **Decision (spec §3):** wherever [B] writes M in
+//! on the `K = min(n, M)` non-empty set means. **Decision (docs/estimators.md §3):** wherever [B] writes M in
 //! the median, Gini, `k` and `c`, K is used; the two differ only while `n < M`.
 
 use super::numeric::{ScaledSum, ScaledSums};

@@ -32,7 +32,7 @@ const SUM_DOWN: f64 = f64::from_bits(((1023 - SUM_SHIFT) as u64) << 52);
 /// `2^SUM_SHIFT`.
 const SUM_UP: f64 = f64::from_bits(((1023 + SUM_SHIFT) as u64) << 52);
 
-/// Neumaier's compensated sum (spec §1): exact to about one rounding for long streams of
+/// Neumaier's compensated sum (docs/estimators.md §1): exact to about one rounding for long streams of
 /// samples that differ in magnitude by many decades, where a naive sum loses the small ones.
 ///
 /// A bare `Neumaier` overflows like any float sum; the estimators wrap theirs in a sum that
@@ -311,9 +311,9 @@ impl ScaledSums {
     }
 }
 
-/// Welford's running mean and population variance (spec §1), mergeable with Chan et al.'s rule.
+/// Welford's running mean and population variance (docs/estimators.md §1), mergeable with Chan et al.'s rule.
 ///
-/// Unlike the sums above, it is **not** rescaled: spec §1 defines `sigma` as `+inf` once `m2`
+/// Unlike the sums above, it is **not** rescaled: docs/estimators.md §1 defines `sigma` as `+inf` once `m2`
 /// overflows (observations spread over more than about `1e154`), and Jung's choice of `M`
 /// follows that literally (`tests/hard_cases.rs` pins it); `M = m_max` then, and the estimate
 /// stays finite.

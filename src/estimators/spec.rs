@@ -1,4 +1,4 @@
-//! Spec strings `name[:key=value,...]` (spec §1a) and their structured form.
+//! Spec strings `name[:key=value,...]` (docs/estimators.md §1a) and their structured form.
 //!
 //! Parsing is strict: unknown names and keys list the valid ones, a repeated key or a missing
 //! required key is an error, and integer keys take integer literals only. Printing gives the
@@ -13,13 +13,13 @@ use std::str::FromStr;
 /// How many buffers Zirr's cascade has.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CascadeSize {
-    /// Grow on demand so no sample lies above the top buffer (spec §5, default for `zirr`).
+    /// Grow on demand so no sample lies above the top buffer (docs/estimators.md §5, default for `zirr`).
     Auto,
     /// The paper's literal fixed cascade of J buffers.
     Fixed(usize),
 }
 
-/// Parameters shared by `zirr` and `zirr-ref` (spec §5, §5a).
+/// Parameters shared by `zirr` and `zirr-ref` (docs/estimators.md §5, §5a).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ZirrParams {
     /// Cascade base `b > 1`.

@@ -1,4 +1,4 @@
-//! Zirr et al.'s cascade reweighting of firefly samples (spec §5 and §5a).
+//! Zirr et al.'s cascade reweighting of firefly samples (docs/estimators.md §5 and §5a).
 //!
 //! Source: T. Zirr, J. Hanika, C. Dachsbacher, "Re-Weighting Firefly Samples for Improved
 //! Finite-Sample Monte Carlo Estimates", Computer Graphics Forum 37(6), 2018 (\[Z\]).
@@ -18,13 +18,13 @@
 //!
 //! Two variants:
 //!
-//! * [`Zirr`] — the paper's method, `zirr` (spec §5).
+//! * [`Zirr`] — the paper's method, `zirr` (docs/estimators.md §5).
 //! * [`ZirrRef`] — the authors' released code (public repository `tszirr/ic.js`, folder `rw/`),
-//!   `zirr-ref` (spec §5a): the top buffer clamps the energy it receives at its reference
+//!   `zirr-ref` (docs/estimators.md §5a): the top buffer clamps the energy it receives at its reference
 //!   brightness (the excess is reported as the extra `discarded`), the weight averages a count
 //!   term and a colour term, and the neighbourhood is always divided by 9 with clamp-to-edge.
 //!
-//! # Decisions (spec §5, §5a)
+//! # Decisions (docs/estimators.md §5, §5a)
 //!
 //! * **Unit rule.** Wherever \[Z\] writes `b^j` this module uses `c_j = u·p_j`, with
 //!   `p_0 = 1, p_j = p_{j−1}·b` (repeated multiplication, never `powi`). Scaling the samples and
@@ -33,7 +33,7 @@
 //!   that a sample with `p_j ≤ s < p_{j+1}` always has buffers `0..=j+1` (\[Z\] eq. 14, and the
 //!   "more buffers" remedy of §5.1); `J_used = 1 + the largest j+1 needed` (at least 1). A fixed
 //!   `J` keeps the literal cascade: a sample above `c_{J−1}` goes wholly to the top buffer, where
-//!   it counts more than one sample and so escapes the lone-firefly test (spec §5, consequence
+//!   it counts more than one sample and so escapes the lone-firefly test (docs/estimators.md §5, consequence
 //!   (i)); such samples are counted in the extra `over_range`.
 //! * **At-most test.** `x ≼ κ_min` means `x ≤ κ_min + 1e-9·max(1, κ_min)`, because a lone firefly
 //!   counts exactly 1 (the default `κ_min`) in real arithmetic and the decision must not depend
@@ -93,13 +93,13 @@
 //! (otherwise an error names the offending index). Only the rejection count `ρ_j` uses the
 //! neighbours; buffers, counts, `N` and the weights' other terms are the centre's.
 //!
-//! * `zirr` (\[Z\] §5.3.1, spec §5): `ρ_j` = the mean of `n_j` over the present pixels that have
+//! * `zirr` (\[Z\] §5.3.1, docs/estimators.md §5): `ρ_j` = the mean of `n_j` over the present pixels that have
 //!   samples (the centre included), summed in row-major order. A pixel whose cascade is shorter
 //!   (`J = auto`) has empty buffers beyond it, so its `n_j` there is computed with those buffers
 //!   as zeros — exactly as if its cascade had grown as far as the centre's. (Its `n_j` one
 //!   buffer past its top is therefore `N·B_top/c_top`, not 0; this keeps the estimate
-//!   independent of how far any cascade grew, as spec §5 requires.)
-//! * `zirr-ref` (spec §5a): `ρ_j` = (sum of nine counts, row-major)/9. A missing pixel at offset
+//!   independent of how far any cascade grew, as docs/estimators.md §5 requires.)
+//! * `zirr-ref` (docs/estimators.md §5a): `ρ_j` = (sum of nine counts, row-major)/9. A missing pixel at offset
 //!   `(dx, dy)` takes the counts of `(dx*, dy*)`, where `dx* = dx` if column `dx` has any present
 //!   pixel and 0 otherwise (rows likewise), or of the centre if `(dx*, dy*)` is missing too
 //!   (this is clamp-to-edge at image borders). A present pixel without samples counts 0.
@@ -126,7 +126,7 @@ use std::fmt;
 pub const MAX_BUFFERS: usize = 4096;
 
 /// The smallest unit `u` whose reciprocal is finite (the subnormal just above `2^-1024`).
-/// The splat computes `s = S/u` (spec §5), which overflows for samples above `u·f64::MAX`;
+/// The splat computes `s = S/u` (docs/estimators.md §5), which overflows for samples above `u·f64::MAX`;
 /// below this unit that bound is under 1, so ordinary samples would all land in the infinite
 /// top buffer and be rejected (`zirr:u=5e-324` estimated 0 for a stream whose mean is 51.9).
 /// Computing in sample units instead would change the spec's operation order, and with it
@@ -141,7 +141,7 @@ const UNCHECKED_MIN: usize = 16;
 /// cascades take the checked additions.
 const UNCHECKED_BUFFERS: usize = 256;
 
-/// Relative tolerance of the at-most test `x ≼ κ_min` (spec §5).
+/// Relative tolerance of the at-most test `x ≼ κ_min` (docs/estimators.md §5).
 const AT_MOST_TOLERANCE: f64 = 1e-9;
 
 /// Floor of the running brightness in the released code's colour term, in units of `u`.
@@ -150,9 +150,9 @@ const REF_BRIGHTNESS_FLOOR: f64 = 0.05;
 /// Which of the two weightings composes the buffers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Flavor {
-    /// \[Z\] eqs. 12–13 with the at-most rejection test (spec §5).
+    /// \[Z\] eqs. 12–13 with the at-most rejection test (docs/estimators.md §5).
     Paper,
-    /// The released shader's averaged count and colour terms (spec §5a).
+    /// The released shader's averaged count and colour terms (docs/estimators.md §5a).
     Reference,
 }
 
@@ -167,7 +167,7 @@ enum Flavor {
 /// * [`Splat::Split`]: `a·X` into buffer `j` and `X − a·X` into buffer `j + 1` (\[Z\] eqs. 15–16,
 ///   the same operations the luminance itself went through);
 /// * [`Splat::Clamped`]: `v·(X/S)` into buffer `j`, the top buffer of `zirr-ref`, which keeps
-///   only `v = c_{J−1}` of the sample's `S` (spec §5a); the fraction `c_{J−1}/S` of `X` is kept
+///   only `v = c_{J−1}` of the sample's `S` (docs/estimators.md §5a); the fraction `c_{J−1}/S` of `X` is kept
 ///   and the rest discarded.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Splat {
@@ -372,7 +372,7 @@ impl Cascade {
         }
     }
 
-    /// Pushes a block of samples (spec §5 "Splat", \[Z\] eqs. 15–16). A sample at or above the
+    /// Pushes a block of samples (docs/estimators.md §5 "Splat", \[Z\] eqs. 15–16). A sample at or above the
     /// top buffer's reference brightness adds itself to the top buffer, or, with `discarded`
     /// (`zirr-ref`), adds `c_{limit−1}` there and the rest to `discarded`.
     ///
@@ -547,7 +547,7 @@ impl Cascade {
         w
     }
 
-    /// Calls `f(j, B_j, n_j, c_j)` for `j` in `0..len` (spec §5 "Buffers", "Counts", eq. 19),
+    /// Calls `f(j, B_j, n_j, c_j)` for `j` in `0..len` (docs/estimators.md §5 "Buffers", "Counts", eq. 19),
     /// with `n_j = N·(B_{j−1}/c_{j−1} + B_j/c_j + B_{j+1}/c_{j+1})` summed left to right and
     /// terms past the cascade limit omitted. Buffers not grown yet (`J = auto`) are zeros.
     /// Requires `N > 0` and `len ≤ limit`.
@@ -591,7 +591,7 @@ impl Cascade {
         out
     }
 
-    /// Composes the buffers (spec §5 "Compose" or §5a "Weight") with rejection counts
+    /// Composes the buffers (docs/estimators.md §5 "Compose" or §5a "Weight") with rejection counts
     /// `rho(j, n_j)`, calling `record(B_j, n_j, ρ_j, w_j)` per buffer; returns the estimate.
     /// Requires `N > 0`.
     #[inline]
@@ -766,7 +766,7 @@ fn check_block<'a, T: fmt::Display>(
     Ok(centre)
 }
 
-/// Zirr et al.'s cascade reweighting as in the paper (spec §5, spec string `zirr`).
+/// Zirr et al.'s cascade reweighting as in the paper (docs/estimators.md §5, spec string `zirr`).
 ///
 /// Extras, in order: `J_used`, `over_range`, `B`, `n`, `rho`, `w` (see the module docs).
 #[derive(Debug, Clone)]
@@ -887,7 +887,7 @@ impl Estimator for Zirr {
     }
 }
 
-/// Zirr et al.'s method as in the authors' released code (spec §5a, spec string `zirr-ref`).
+/// Zirr et al.'s method as in the authors' released code (docs/estimators.md §5a, spec string `zirr-ref`).
 ///
 /// Extras, in order: `J_used`, `over_range`, `B`, `n`, `rho`, `w`, and `discarded`: the energy
 /// above `c_{J−1}` dropped at the top buffer, `Σ (S − c_{J−1}) / N` over the samples with
@@ -955,7 +955,7 @@ impl ZirrRef {
 
     /// The estimate of the centre pixel of a 3×3 block as the released shader computes it:
     /// `ρ_j` = the sum of nine counts over 9, with clamp-to-edge substitution for missing
-    /// pixels and 0 for present pixels without samples (spec §5a; see the module docs).
+    /// pixels and 0 for present pixels without samples (docs/estimators.md §5a; see the module docs).
     /// Errors as [`Zirr::block_estimate`].
     pub fn block_estimate(block: &[Option<&Self>; 9]) -> Result<(f64, Extras)> {
         let (centre, rho) = Self::block_rho(block)?;
@@ -991,7 +991,7 @@ impl ZirrRef {
         Ok(centre.c.weights(Flavor::Reference, Some(&rho)))
     }
 
-    /// The checked centre of a block and its rejection counts `ρ_j` (spec §5a).
+    /// The checked centre of a block and its rejection counts `ρ_j` (docs/estimators.md §5a).
     fn block_rho<'a>(block: &[Option<&'a Self>; 9]) -> Result<(&'a Self, Vec<f64>)> {
         let centre = check_block(block, |z: &ZirrRef| &z.c)?;
         let len = centre.c.a.len();

@@ -1,5 +1,5 @@
 //! Adaptive bandwidths and the approximate distribution representation ([P] §3.1 eq. 4, §4.2;
-//! spec §6.3).
+//! docs/estimators.md §6.3).
 
 use super::for_each_run;
 
@@ -23,7 +23,7 @@ impl PajotMode {
         self.count >= 2
     }
 
-    /// The points the mode stands for when bandwidths are computed (spec §6.3):
+    /// The points the mode stands for when bandwidths are computed (docs/estimators.md §6.3):
     /// `lo + ((hi - lo) k) / (count - 1)` for `k = 0..count-2`, then `hi`; a single mode is `lo`.
     pub fn points(&self) -> impl Iterator<Item = f64> + '_ {
         let c = self.count;
@@ -35,7 +35,7 @@ impl PajotMode {
     }
 }
 
-/// Eq. 4 bandwidths of an ascending point set (spec §6.3): all 0 when there are fewer than two
+/// Eq. 4 bandwidths of an ascending point set (docs/estimators.md §6.3): all 0 when there are fewer than two
 /// points or the mean nearest-neighbour distance `nn` is 0; otherwise `h_i = nn sqrt(g / p_i)`
 /// with the Epanechnikov pilot `p_i` (bandwidth `nn`) and `g` the geometric mean of the `p_i`.
 ///
@@ -165,7 +165,7 @@ impl Adr {
         self.m != old
     }
 
-    /// After learning, adds a non-black `l` to the representation (spec §6.3). Returns whether
+    /// After learning, adds a non-black `l` to the representation (docs/estimators.md §6.3). Returns whether
     /// `m` changed.
     pub(super) fn update(&mut self, l: f64) -> bool {
         // Most samples fall in the mode the previous one fell in: try it before searching.
@@ -354,7 +354,7 @@ impl Seg {
         Seg { lo, hi, c, d, w: 0 }
     }
 
-    /// Point `k` (spec §6.3's formula; the last one is `hi`).
+    /// Point `k` (docs/estimators.md §6.3's formula; the last one is `hi`).
     #[inline]
     fn at(&self, k: u64) -> f64 {
         if k + 1 >= self.c {

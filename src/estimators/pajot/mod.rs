@@ -1,5 +1,5 @@
 //! Pajot et al.'s outlier delaying by density estimation: [`PajotRot`], [`PajotAdr`] and
-//! [`PajotHybrid`] (spec §6).
+//! [`PajotHybrid`] (docs/estimators.md §6).
 //!
 //! Source: A. Pajot, L. Barthe, M. Paulin, "Sample-Space Bright Spots Removal Using Density
 //! Estimation", Graphics Interface 2011 (**[P]**). Each pixel keeps a one-dimensional density
@@ -9,13 +9,13 @@
 //! reach it, and every delayed sample is re-tested whenever the acceptance bound `m` grows
 //! ([P] Alg. 1). The first `learn` samples only build the initial density ([P] §4.1).
 //!
-//! - **ROT** ([P] §4.4, eq. 5; spec §6.2): every kernel has the rule-of-thumb half-width
+//! - **ROT** ([P] §4.4, eq. 5; docs/estimators.md §6.2): every kernel has the rule-of-thumb half-width
 //!   `h = (25 k)^(-1/5) σ` of the `k` log-luminances seen so far. Per-pixel state: the running
 //!   moments, `m` and the delayed list.
-//! - **ADR** ([P] §3.1 eq. 4, §4.2; spec §6.3): adaptive bandwidths (eq. 4) over an approximate
+//! - **ADR** ([P] §3.1 eq. 4, §4.2; docs/estimators.md §6.3): adaptive bandwidths (eq. 4) over an approximate
 //!   distribution representation, in which an extended mode is kept as `(min, max, count)`
 //!   ([`PajotMode`]). Per-pixel state: the modes, `m` and the delayed list.
-//! - **Hybrid** ([P] §4.6; spec §6.4): both run side by side; once `T` successive updates of
+//! - **Hybrid** ([P] §4.6; docs/estimators.md §6.4): both run side by side; once `T` successive updates of
 //!   the bounds agree within `δ`, the pixel continues with ROT alone and the modes are freed.
 //!
 //! The estimate is the compensated mean of the accepted samples (black samples included).
@@ -193,7 +193,7 @@ fn fmt_cap(f: &mut fmt::Formatter<'_>, ledger: &Ledger) -> fmt::Result {
     Ok(())
 }
 
-/// Pajot et al.'s outlier delaying with the rule-of-thumb bandwidth (spec §6.2),
+/// Pajot et al.'s outlier delaying with the rule-of-thumb bandwidth (docs/estimators.md §6.2),
 /// `pajot-rot:learn=50`.
 #[derive(Debug, Clone)]
 pub struct PajotRot {
@@ -369,7 +369,7 @@ impl Estimator for PajotRot {
 }
 
 /// Pajot et al.'s outlier delaying with adaptive bandwidths over the approximate distribution
-/// representation (spec §6.3), `pajot-adr:learn=50`.
+/// representation (docs/estimators.md §6.3), `pajot-adr:learn=50`.
 #[derive(Debug, Clone)]
 pub struct PajotAdr {
     learn: usize,
@@ -542,7 +542,7 @@ impl Estimator for PajotAdr {
 }
 
 /// ADR and ROT side by side, switching to ROT alone once their bounds agree `T` times in a row
-/// within `δ` (spec §6.4), `pajot-hybrid:learn=50,T=2,delta=0`.
+/// within `δ` (docs/estimators.md §6.4), `pajot-hybrid:learn=50,T=2,delta=0`.
 #[derive(Debug, Clone)]
 pub struct PajotHybrid {
     learn: usize,

@@ -1,4 +1,4 @@
-//! The rule-of-thumb bound ([P] §4.4, eq. 5; spec §6.2).
+//! The rule-of-thumb bound ([P] §4.4, eq. 5; docs/estimators.md §6.2).
 
 use super::for_each_run;
 use crate::estimators::Welford;
