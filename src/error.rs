@@ -163,9 +163,7 @@ impl ParamValue for f64 {
 
 impl ParamValue for f32 {
     fn text(&self) -> String {
-        // Through f32's own shortest form, so 0.1f32 prints as 0.1.
-        let x: f64 = self.to_string().parse().unwrap_or(f64::from(*self));
-        Num(x).to_string()
+        Num::from_f32(*self).to_string()
     }
 }
 
@@ -208,6 +206,14 @@ impl<T: ParamValue + ?Sized> ParamValue for &T {
 /// prints as 309 digits.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Num(pub f64);
+
+impl Num {
+    /// An f32 through its own shortest decimal, so `0.1f32` prints as `0.1`, not as the f64
+    /// `0.10000000149011612`.
+    pub fn from_f32(x: f32) -> Self {
+        Num(x.to_string().parse().unwrap_or(f64::from(x)))
+    }
+}
 
 impl fmt::Display for Num {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

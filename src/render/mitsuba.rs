@@ -41,6 +41,7 @@ use super::scene::{
 };
 use super::shapes::triangle_normal;
 use crate::error::{Error, Num, Result};
+use crate::limits::shorten;
 
 /// Loads a Mitsuba 3 scene file; `obj` files it names are resolved relative to its folder.
 ///
@@ -151,10 +152,6 @@ pub const MAX_COORDINATE: f32 = 1e18;
 /// 2^64 bytes.
 const MAX_SUBSTITUTED_BYTES: usize = 1 << 16;
 
-/// Longest user text quoted in a message (a hostile file may hold a megabyte in one
-/// attribute).
-const QUOTE_MAX: usize = 80;
-
 /// A value with the element it came from, so that range checks can point at that element.
 type At<'a, 'i, T> = Option<(T, Node<'a, 'i>)>;
 
@@ -167,7 +164,7 @@ fn value_or<T>(at: At<'_, '_, T>, default: T) -> T {
 /// as written in the file.
 fn describe(node: Node) -> String {
     let name = node.tag_name().name();
-    let tag = clip(name);
+    let tag = shorten(name);
     let keys: &[&str] = if name == "ref" {
         &["id", "name"]
     } else {
@@ -176,7 +173,7 @@ fn describe(node: Node) -> String {
     keys.iter()
         .find_map(|key| {
             node.attribute(*key)
-                .map(|value| format!("{tag} {key}=\"{}\"", clip(value)))
+                .map(|value| format!("{tag} {key}=\"{}\"", shorten(value)))
         })
         .unwrap_or(tag)
 }
@@ -186,19 +183,9 @@ fn list(items: &[&str]) -> String {
     items.join(", ")
 }
 
-/// User text for a message, cut after [`QUOTE_MAX`] characters.
-fn clip(text: &str) -> String {
-    match text.char_indices().nth(QUOTE_MAX) {
-        Some((cut, _)) => format!("{}...", &text[..cut]),
-        None => text.to_string(),
-    }
-}
-
-/// An f32 as messages print numbers: its shortest round-trip digits, in scientific notation
-/// outside `[1e-4, 1e16)` (f32's own `Display` prints `3e38` as 39 digits).
+/// An f32 as messages print numbers ([`Num::from_f32`]).
 fn num(x: f32) -> Num {
-    // The f32's shortest decimal, read back as f64, keeps f32's digits (0.1, not 0.100000001).
-    Num(x.to_string().parse().unwrap_or(f64::from(x)))
+    Num::from_f32(x)
 }
 
 /// `(x, y, z)` with [`num`] components.
@@ -328,7 +315,7 @@ impl<'a, 'i> Props<'a, 'i> {
                         child,
                         format!(
                             "parameter \"{}\" given twice in <{}> (first at line {})",
-                            clip(&name),
+                            shorten(&name),
                             describe(owner),
                             ld.line(params[first].node)
                         ),
@@ -347,7 +334,7 @@ impl<'a, 'i> Props<'a, 'i> {
                     child,
                     format!(
                         "unsupported element <{}> inside <{}> (line {})",
-                        clip(tag),
+                        shorten(tag),
                         describe(owner),
                         ld.line(owner)
                     ),
@@ -421,7 +408,7 @@ impl<'a, 'i> Props<'a, 'i> {
             } else {
                 "is not an integer"
             };
-            ld.err(node, format!("value=\"{}\" {why}", clip(&text)))
+            ld.err(node, format!("value=\"{}\" {why}", shorten(&text)))
         })?;
         Ok(Some((value, node)))
     }
@@ -438,7 +425,10 @@ impl<'a, 'i> Props<'a, 'i> {
             _ => {
                 return Err(ld.err(
                     node,
-                    format!("value=\"{}\" is not a boolean (true or false)", clip(&text)),
+                    format!(
+                        "value=\"{}\" is not a boolean (true or false)",
+                        shorten(&text)
+                    ),
                 ));
             }
         };
@@ -471,7 +461,7 @@ impl<'a, 'i> Props<'a, 'i> {
                         node,
                         format!(
                             "value=\"{}\" must hold 1 or 3 numbers, found {}",
-                            clip(&text),
+                            shorten(&text),
                             other.len()
                         ),
                     ));
@@ -481,7 +471,7 @@ impl<'a, 'i> Props<'a, 'i> {
         if value.min_element() < 0.0 {
             return Err(ld.err(
                 node,
-                format!("value=\"{}\" has a negative component", clip(&text)),
+                format!("value=\"{}\" has a negative component", shorten(&text)),
             ));
         }
         Ok(Some((value, node)))
@@ -519,7 +509,7 @@ impl<'a, 'i> Props<'a, 'i> {
                     node,
                     format!(
                         "unknown index of refraction \"{}\"; known names: {}",
-                        clip(&text),
+                        shorten(&text),
                         list(&names)
                     ),
                 ));
@@ -531,7 +521,7 @@ impl<'a, 'i> Props<'a, 'i> {
                 node,
                 format!(
                     "value=\"{}\": an index of refraction must be > 0",
-                    clip(&text)
+                    shorten(&text)
                 ),
             ));
         }
@@ -592,7 +582,7 @@ impl<'a, 'i> Props<'a, 'i> {
                     param.node,
                     format!(
                         "unknown parameter \"{}\"{hint} for {}; {supported}",
-                        clip(name),
+                        shorten(name),
                         owner()
                     ),
                 ))
@@ -666,7 +656,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                             file: self.file.to_string(),
                             line: self.lines.line(start),
                             element: describe(node),
-                            message: format!("unexpected text {:?}", clip(text)),
+                            message: format!("unexpected text {:?}", shorten(text)),
                         });
                     }
                 }
@@ -704,8 +694,8 @@ impl<'a, 'i> Loader<'a, 'i> {
                     node,
                     format!(
                         "unknown attribute {}=\"{}\"; {expected}",
-                        clip(attr.name()),
-                        clip(attr.value())
+                        shorten(attr.name()),
+                        shorten(attr.value())
                     ),
                 ));
             }
@@ -724,7 +714,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
                 .unwrap_or(after.len());
             let name = &after[..len];
-            let raw_text = clip(raw);
+            let raw_text = shorten(raw);
             if name.is_empty() {
                 return Err(self.err(
                     node,
@@ -732,7 +722,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 ));
             }
             let Some((value, _)) = self.defaults.get(name) else {
-                let name = clip(name);
+                let name = shorten(name);
                 return Err(self.err(
                     node,
                     format!(
@@ -781,7 +771,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 node,
                 format!(
                     "unsupported {kind} type \"{}\"; supported: {}",
-                    clip(&ty),
+                    shorten(&ty),
                     list(known)
                 ),
             ))
@@ -801,7 +791,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 node,
                 format!(
                     "id \"{}\" is already used by <{element}> at line {}",
-                    clip(&id),
+                    shorten(&id),
                     self.lines.line(*offset)
                 ),
             ));
@@ -817,7 +807,7 @@ impl<'a, 'i> Loader<'a, 'i> {
             Ok(value) if value.is_finite() => Ok(value),
             _ => Err(self.err(
                 node,
-                format!("{attr}=\"{}\" is not a finite number", clip(text)),
+                format!("{attr}=\"{}\" is not a finite number", shorten(text)),
             )),
         }
     }
@@ -832,8 +822,8 @@ impl<'a, 'i> Loader<'a, 'i> {
                     node,
                     format!(
                         "{attr}=\"{}\": \"{}\" is not a finite number",
-                        clip(text),
-                        clip(token)
+                        shorten(text),
+                        shorten(token)
                     ),
                 )),
             })
@@ -848,7 +838,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 node,
                 format!(
                     "{attr}=\"{}\" must hold 3 numbers, found {}",
-                    clip(text),
+                    shorten(text),
                     other.len()
                 ),
             )),
@@ -869,7 +859,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                     node,
                     format!(
                         "value=\"{}\" given together with x/y/z; use one or the other",
-                        clip(&value)
+                        shorten(&value)
                     ),
                 ));
             }
@@ -934,7 +924,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                             op,
                             format!(
                                 "value=\"{}\" must hold 16 numbers (row-major 4x4), found {}",
-                                clip(&text),
+                                shorten(&text),
                                 values.len()
                             ),
                         ));
@@ -952,7 +942,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                         format!(
                             "unsupported transform operation <{}> in <{}> (line {}); \
                              supported: translate, rotate, scale, matrix, lookat",
-                            clip(other),
+                            shorten(other),
                             describe(node),
                             self.line(node)
                         ),
@@ -982,7 +972,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                         format!(
                             "value=\"{}\" given together with {key}; use one \
                              or the other",
-                            clip(&text)
+                            shorten(&text)
                         ),
                     ));
                 }
@@ -995,7 +985,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                             format!(
                                 "value=\"{}\" must hold 1 (uniform) or 3 \
                                  numbers, found {}",
-                                clip(&text),
+                                shorten(&text),
                                 other.len()
                             ),
                         ));
@@ -1089,7 +1079,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 root,
                 format!(
                     "version=\"{}\" is not a Mitsuba 3 version (3.x.y)",
-                    clip(version)
+                    shorten(version)
                 ),
             ));
         }
@@ -1151,7 +1141,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                         format!(
                             "unsupported element <{}> in <scene>; supported: default, \
                              integrator, sensor, shape, bsdf, emitter",
-                            clip(other)
+                            shorten(other)
                         ),
                     ));
                 }
@@ -1181,7 +1171,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 node,
                 format!(
                     "name=\"{}\" is not a parameter name (letters, digits, '_')",
-                    clip(name)
+                    shorten(name)
                 ),
             ));
         }
@@ -1191,7 +1181,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 node,
                 format!(
                     "a second default for ${} (the first is at line {})",
-                    clip(name),
+                    shorten(name),
                     self.lines.line(*offset)
                 ),
             ));
@@ -1286,7 +1276,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                         at,
                         format!(
                             "fov_axis = \"{}\": must be x, y, diagonal, smaller or larger",
-                            clip(&axis)
+                            shorten(&axis)
                         ),
                     ));
                 }
@@ -1409,7 +1399,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 if !allowed.contains(&value.as_str()) {
                     return Err(self.err(
                         at,
-                        format!("\"{}\" is not one of {}", clip(&value), list(allowed)),
+                        format!("\"{}\" is not one of {}", shorten(&value), list(allowed)),
                     ));
                 }
             }
@@ -1485,7 +1475,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 node,
                 format!(
                     "id \"{}\" refers to <{element}> at line {}, not to a bsdf",
-                    clip(&id),
+                    shorten(&id),
                     self.lines.line(*offset)
                 ),
             ));
@@ -1501,7 +1491,7 @@ impl<'a, 'i> Loader<'a, 'i> {
             (false, 0) => list(&known),
             (false, more) => format!("{} and {more} more", list(&known)),
         };
-        let id = clip(&id);
+        let id = shorten(&id);
         Err(self.err(
             node,
             format!("unknown id \"{id}\"; bsdfs declared so far: {known}"),
@@ -1570,7 +1560,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                             at,
                             format!(
                                 "distribution \"{}\" is not modelled; only \"ggx\" is",
-                                clip(&d)
+                                shorten(&d)
                             ),
                         ));
                     }
@@ -1673,7 +1663,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 format!(
                     "material \"{}\" is not modelled; only \"none\" (a mirror tinted by \
                      specular_reflectance)",
-                    clip(&name)
+                    shorten(&name)
                 ),
             )),
             _ => Ok(()),
@@ -1944,7 +1934,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 node,
                 format!(
                     "only area emitters may be nested in a shape, not \"{}\"",
-                    clip(&ty)
+                    shorten(&ty)
                 ),
             ));
         }
@@ -2237,6 +2227,5 @@ mod tests {
         assert_eq!(num(0.1).to_string(), "0.1");
         assert_eq!(num(-2.5).to_string(), "-2.5");
         assert_eq!(vec_text(Vec3::new(1e20, 0.5, -0.0)), "(1e20, 0.5, -0)");
-        assert_eq!(clip(&"x".repeat(1000)).len(), QUOTE_MAX + 3);
     }
 }

@@ -12,6 +12,7 @@
 //! `o`, `g`, `s`, `usemtl`, `mtllib`, `l`, `p` and unknown statements are ignored, as Mitsuba
 //! ignores them.
 
+use crate::limits::shorten;
 use std::collections::HashMap;
 
 use glam::Vec3;
@@ -39,16 +40,10 @@ pub struct ObjError {
     pub message: String,
 }
 
-/// Longest token quoted in a message: a hostile file may hold a megabyte on one line.
-const QUOTE_MAX: usize = 40;
-
-/// `token` for a message, shortened past [`QUOTE_MAX`] characters.
+/// `token` for a message: escaped and cut to about 40 characters ([`shorten`]), since a
+/// hostile file may hold a megabyte on one line.
 fn quote(token: &[u8]) -> String {
-    let text = String::from_utf8_lossy(token);
-    match text.char_indices().nth(QUOTE_MAX) {
-        Some((cut, _)) => format!("\"{}...\"", &text[..cut]),
-        None => format!("\"{text}\""),
-    }
+    format!("\"{}\"", shorten(&String::from_utf8_lossy(token)))
 }
 
 /// One face vertex: 0-based indices into the `v`, `vt` and `vn` lists read so far.
