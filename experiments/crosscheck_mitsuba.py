@@ -24,12 +24,30 @@ Speed: samples per second = width * height * spp / seconds, where seconds is the
 the `mi.render` call alone for Mitsuba and the renderer's own `wall_s` for ours, summed over the
 seeds; both run on the same number of threads (`--threads`, default all cores).
 
+Scene copies and overrides. Some scenes cannot be given to both renderers as they are; the
+script then writes a modified copy of the XML next to the original (so that relative paths to
+meshes and textures still resolve) under a temporary hidden name, gives that copy to the
+renderer, and removes it afterwards; every change is printed and recorded in the report:
+  - a film whose reconstruction filter is not `box` (Mitsuba's default, when none is given, is
+    `gaussian`): Mitsuba renders with a box filter, and ours is run with `--rfilter box`, so
+    both estimate the plain per-pixel mean that the test compares;
+  - film parameters of the Mitsuba 0.5 format that Mitsuba 3 rejects (`high_quality_edges`)
+    are dropped from Mitsuba's copy (it upgrades the other 0.5 names itself);
+  - a per-scene resolution (SCENE_SETTINGS, or --size for all scenes) rewrites the film's
+    width and height in both renderers' copies, and a per-scene spp and seed count replace
+    the defaults (explicit --spp and --seeds win). living-room (1280x720, `max_depth` 65)
+    runs this way at a reduced resolution.
+
 Usage (any CPython 3.11 with the venv module and pip; nothing else needs to be installed):
 
     python3 experiments/crosscheck_mitsuba.py [SCENE.xml ...] [--spp N] [--seeds K]
         [--block B] [--threads T] [--quick] [--no-build] [--mitsuba-only] [--out DIR]
+        [--size WxH] [--no-scene-settings]
 
-Scenes default to every *.xml in experiments/scenes/. The script makes its own virtual environment in experiments/.venv-mitsuba,
+Scenes default to experiments/scenes/*.xml, experiments/scenes/features/*.xml and
+experiments/scenes/living-room/scene.xml. A scene is named by its file's stem, or by its folder
+when the file is `scene.xml` (Bitterli's layout): that name keys SCENE_SETTINGS and the images.
+The script makes its own virtual environment in experiments/.venv-mitsuba,
 installs the pinned Mitsuba, Dr.Jit, NumPy and SciPy there if they are missing, and re-runs
 itself inside it. It builds the binary with `cargo build --release` unless --no-build or
 --mitsuba-only. It prints a Markdown table and writes it with a JSON report to
@@ -37,7 +55,9 @@ reports/crosscheck/ (crosscheck.md, crosscheck.json, and the seed-averaged image
 renderer under images/).
 
 Exit status: 0 when no scene shows bias, 1 when any scene does, 2 when a scene could not be
-rendered or compared (and none showed bias), 3 when the build or the environment failed.
+rendered or compared (and none showed bias), 3 when the build or the environment failed. A
+scene that one renderer cannot render (for ours: a plugin it does not read yet, exit 2) is
+reported as "could not be rendered" with the renderer's message, and the run goes on.
 """
 
 import argparse
@@ -45,12 +65,14 @@ import datetime
 import json
 import os
 import platform
+import re
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
 import venv
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -82,6 +104,24 @@ DEGENERATE_RTOL = 1e-4
 DEGENERATE_ATOL = 1e-7
 
 EXIT_OK, EXIT_BIAS, EXIT_ERROR, EXIT_SETUP = 0, 1, 2, 3
+
+# Per-scene settings, keyed by scene name (see scene_name): film size (both renderers), spp and
+# seeds, and under "quick" what --quick uses instead. Explicit --spp, --seeds or --size win.
+# living-room is 1280x720 with max_depth 65. Mitsuba 3.9.1 scalar_rgb on this machine (two
+# cores), 16 spp, box filter: loading 0.5 s of CPU; rendering 2.0 s of CPU per seed at 160x90
+# and 7.8 s at 320x180, which is 1.0 s and 3.9 s of wall clock on two idle cores (measured 1.1
+# s and 4.5 s), and 4 s and 15 s while the machine was shared with builds (load ~6). So
+# --quick (4 seeds x 16 spp at 160x90) costs Mitsuba 5 s idle and ~20 s shared, and the default
+# (8 seeds x 64 spp at 320x180) about 2 minutes idle.
+SCENE_SETTINGS = {
+    "living-room": {
+        "width": 320, "height": 180, "spp": 64, "seeds": 8,
+        "quick": {"width": 160, "height": 90, "spp": 16, "seeds": 4},
+    },
+}
+# Film parameters of the Mitsuba 0.5 format that Mitsuba 3 rejects as unreferenced; they only
+# affect how 0.5 drew its film, so Mitsuba's copy drops them.
+MITSUBA3_UNKNOWN_FILM_PARAMS = ("high_quality_edges",)
 
 
 # --- environment -----------------------------------------------------------------------------
@@ -139,13 +179,178 @@ def ensure_venv_and_reexec() -> None:
 # --- scenes and renderers ----------------------------------------------------------------------
 
 def default_scenes() -> list:
-    return sorted(OUR_SCENES.glob("*.xml"))
+    scenes = sorted(OUR_SCENES.glob("*.xml")) + sorted((OUR_SCENES / "features").glob("*.xml"))
+    living_room = OUR_SCENES / "living-room" / "scene.xml"
+    if living_room.is_file():
+        scenes.append(living_room)
+    return scenes
+
+
+def scene_name(path: Path) -> str:
+    """The file's stem, or its folder's name for a `scene.xml` (one folder per scene)."""
+    path = path.resolve()
+    return path.parent.name if path.name == "scene.xml" else path.stem
 
 
 def label(path: Path) -> str:
     """The scene's name in the report: its path relative to the repository, so equal file
     names in different folders stay apart."""
     return os.path.relpath(path.resolve(), ROOT)
+
+
+def shorten(text: str, limit: int = 240) -> str:
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+# --- scene copies ------------------------------------------------------------------------------
+
+def parse_xml(path: Path):
+    """The scene's element tree, comments kept (so a copy differs only where it was changed)."""
+    parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    return ET.parse(str(path), parser=parser)
+
+
+# What may stand before the root element: the XML declaration, comments, a doctype, space.
+PROLOGUE_ITEM = re.compile(r"\s*(<\?.*?\?>|<!--.*?-->|<!DOCTYPE[^>]*>)\s*", re.S)
+
+
+def prologue(text: str) -> str:
+    """The text before the root element, which ElementTree does not keep."""
+    end = 0
+    while (m := PROLOGUE_ITEM.match(text, end)) and m.end() > end:
+        end = m.end()
+    return text[:end]
+
+
+def film_elements(root) -> list:
+    return [film for sensor in root.iter("sensor") for film in sensor.findall("film")]
+
+
+def set_film_integer(film, name: str, value: int) -> None:
+    for child in film:
+        if child.tag == "integer" and child.get("name") == name:
+            child.set("value", str(value))
+            return
+    ET.SubElement(film, "integer", {"name": name, "value": str(value)})
+
+
+def plan_scene(path: Path, size) -> dict:
+    """What each renderer needs changed in its copy of the scene. `size` is (width, height) or
+    None. Returns {"rfilter": the film's filter type (or "gaussian" when none is given, as
+    Mitsuba defaults), "mitsuba": [changes], "ours": [changes], "our_args": [...],
+    "notes": [one line per change, for the report]}."""
+    root = parse_xml(path).getroot()
+    films = film_elements(root)
+    plan = {"rfilter": None, "mitsuba": [], "ours": [], "our_args": [], "notes": []}
+    if not films:
+        return plan
+    film = films[0]
+    rfilter = film.find("rfilter")
+    plan["rfilter"] = "gaussian" if rfilter is None else rfilter.get("type", "?")
+    if plan["rfilter"] != "box":
+        plan["mitsuba"].append(("rfilter", "box"))
+        plan["our_args"] = ["--rfilter", "box"]
+        given = "no rfilter (Mitsuba's default: gaussian)" if rfilter is None else \
+            f"rfilter {plan['rfilter']}"
+        plan["notes"].append(f"{given} -> box: Mitsuba renders a copy with a box filter, "
+                             f"ours runs with --rfilter box")
+    dropped = [c.get("name") for c in film if c.get("name") in MITSUBA3_UNKNOWN_FILM_PARAMS]
+    for name in dropped:
+        plan["mitsuba"].append(("drop", name))
+        plan["notes"].append(f"film parameter {name} (Mitsuba 0.5) dropped from Mitsuba's "
+                             f"copy: Mitsuba 3 rejects it")
+    if size is not None:
+        def current(name):
+            for c in film:
+                if c.tag == "integer" and c.get("name") == name:
+                    return c.get("value")
+            return "default"
+        was = f"{current('width')}x{current('height')}"
+        if was != f"{size[0]}x{size[1]}":
+            for who in ("mitsuba", "ours"):
+                plan[who].append(("size", size))
+            plan["notes"].append(f"film {was} -> {size[0]}x{size[1]} in both renderers' copies")
+    return plan
+
+
+def remove_keeping_lines(parent, child) -> None:
+    """Removes `child`, moving its tail (the newline after it) to what precedes it, so that the
+    copy's line numbers, which the renderers' messages cite, stay those of the original."""
+    children = list(parent)
+    i = children.index(child)
+    tail = child.tail or ""
+    if i > 0:
+        children[i - 1].tail = (children[i - 1].tail or "") + tail
+    else:
+        parent.text = (parent.text or "") + tail
+    parent.remove(child)
+
+
+def write_scene_copy(path: Path, changes: list, who: str) -> Path:
+    """Writes the scene with `changes` applied next to the original, under a hidden temporary
+    name (relative paths to meshes and textures still resolve), line for line as the original
+    where nothing changed; the caller removes it."""
+    tree = parse_xml(path)
+    for film in film_elements(tree.getroot()):
+        for kind, value in changes:
+            if kind == "rfilter":
+                old = film.findall("rfilter")
+                new = ET.Element("rfilter", {"type": value})
+                if old:
+                    new.tail = old[0].tail  # the new element takes the old one's line
+                    film.insert(list(film).index(old[0]), new)
+                    film.remove(old[0])
+                    for element in old[1:]:
+                        remove_keeping_lines(film, element)
+                else:
+                    film.append(new)
+            elif kind == "drop":
+                for child in [c for c in film if c.get("name") == value]:
+                    remove_keeping_lines(film, child)
+            elif kind == "size":
+                set_film_integer(film, "width", value[0])
+                set_film_integer(film, "height", value[1])
+    head = prologue(path.read_text(encoding="utf-8", errors="replace"))
+    # The copy is written as UTF-8 whatever the original declared; the declaration says so.
+    head = re.sub(r"<\?xml.*?\?>", '<?xml version="1.0" encoding="utf-8"?>', head, count=1,
+                  flags=re.S)
+    body = ET.tostring(tree.getroot(), encoding="unicode")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.crosscheck-", suffix=f".{who}.xml",
+                               dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(head + body + "\n")
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return Path(tmp)
+
+
+def unmask(text: str, copy: Path, original: Path) -> str:
+    """A message about a scene copy, naming the original file instead of the copy."""
+    if copy == original:
+        return text
+    for form in (str(copy.resolve()), str(copy), copy.name):
+        text = text.replace(form, f"{original.name} (copy)" if form == copy.name
+                            else f"{original} (copy)")
+    return text
+
+
+def scene_run_settings(path: Path, args) -> dict:
+    """spp, seeds and film size (or None: the scene's own) for one scene."""
+    table = {} if args.no_scene_settings else dict(SCENE_SETTINGS.get(scene_name(path), {}))
+    if args.quick:
+        table.update(table.pop("quick", {}))
+    else:
+        table.pop("quick", None)
+    size = args.size or ((table["width"], table["height"]) if "width" in table else None)
+    return {
+        "spp": args.spp or table.get("spp") or (QUICK_SPP if args.quick else DEFAULT_SPP),
+        "seeds": args.seeds or table.get("seeds") or (QUICK_SEEDS if args.quick
+                                                      else DEFAULT_SEEDS),
+        "size": size,
+    }
 
 
 def rgb(array):
@@ -165,7 +370,9 @@ def render_mitsuba(path: Path, spp: int, seeds: list) -> dict:
     import mitsuba as mi
     import numpy as np
 
+    start = time.perf_counter()
     scene = mi.load_file(str(path))
+    load_s = time.perf_counter() - start
     images, seconds = [], []
     for seed in seeds:
         start = time.perf_counter()
@@ -177,11 +384,21 @@ def render_mitsuba(path: Path, spp: int, seeds: list) -> dict:
     return {
         "images": np.stack(images),
         "seconds": seconds,
+        "load_s": load_s,
         "samples_per_s": width * height * spp * len(seeds) / sum(seconds),
     }
 
 
-def render_ours(binary: Path, path: Path, spp: int, seeds: list, threads: int) -> dict:
+class RenderFailed(RuntimeError):
+    """Our renderer exited non-zero or wrote no result; `brief` is the gist for the table."""
+
+    def __init__(self, message: str, brief: str):
+        super().__init__(message)
+        self.brief = brief
+
+
+def render_ours(binary: Path, path: Path, spp: int, seeds: list, threads: int,
+                extra_args: list = ()) -> dict:
     """Runs `fireflies render` once per seed; returns the mean images and its own timings."""
     import mitsuba as mi
     import numpy as np
@@ -190,17 +407,22 @@ def render_ours(binary: Path, path: Path, spp: int, seeds: list, threads: int) -
     for seed in seeds:
         with tempfile.TemporaryDirectory(prefix="fireflies-crosscheck-") as out:
             cmd = [str(binary), "render", str(path), "--spp", str(spp), "--seed", str(seed),
-                   "--estimators", "mean", "--threads", str(threads), "--out", out]
+                   "--estimators", "mean", "--threads", str(threads), "--out", out,
+                   *extra_args]
             done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                   text=True)
             if done.returncode != 0:
-                raise RuntimeError(f"{' '.join(cmd)} exited {done.returncode}:\n"
-                                   f"{done.stderr.strip()}")
+                lines = [ln for ln in done.stderr.strip().splitlines() if ln.strip()]
+                gist = lines[0] if lines else "(no message)"
+                raise RenderFailed(f"{' '.join(cmd)} exited {done.returncode}:\n"
+                                   f"{done.stderr.strip()}",
+                                   f"exit {done.returncode}: {shorten(gist)}")
             exr = Path(out) / "mean.exr"
             manifest = Path(out) / "render.json"
             for needed in (exr, manifest):
                 if not needed.exists():
-                    raise RuntimeError(f"{' '.join(cmd)} wrote no {needed.name}")
+                    raise RenderFailed(f"{' '.join(cmd)} wrote no {needed.name}",
+                                       f"wrote no {needed.name}")
             images.append(rgb(np.array(mi.Bitmap(str(exr)))))
             info = json.loads(manifest.read_text())
             seconds.append(float(info["wall_s"]))
@@ -316,25 +538,28 @@ def markdown(settings: dict, rows: list) -> str:
         "",
         f"Mitsuba {settings['mitsuba']} (`{VARIANT}`, Dr.Jit {settings['drjit']}) against "
         f"`fireflies render --estimators mean`, {settings['threads']} thread(s) each, "
-        f"seeds 0..{settings['seeds'] - 1}, {settings['block']}x{settings['block']}-pixel "
+        f"seeds 0..K-1 (K per scene), {settings['block']}x{settings['block']}-pixel "
         f"blocks. Welch's t-test per block and channel (Jung, Hanika and Dachsbacher, JCGT "
         f"2020) at family alpha = {FAMILY_ALPHA} per scene, Sidak-corrected; without bias "
-        f"about {FAMILY_ALPHA:.0%} of scenes show one rejecting test by chance, and a single "
-        f"rejecting scene fails the check. Samples/s = width x height x spp / wall-clock "
+        f"about {FAMILY_ALPHA * 100:g}% of scenes show one rejecting test by chance, and a "
+        f"single rejecting scene fails the check. Samples/s = width x height x spp / wall-clock "
         f"seconds of the render (Mitsuba: the `mi.render` call; ours: `wall_s`).",
         "",
-        "| scene | spp | seeds | blocks rejecting / tests | mean rel. diff ± SE "
+        "| scene | size | spp | seeds | blocks rejecting / tests | mean rel. diff ± SE "
         "| Mitsuba Msamples/s | ours Msamples/s | ratio | verdict |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---|",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
+    notes = []
     for r in rows:
         ours = r.get("ours") or {}
         welch = r.get("welch")
         diff = r.get("difference")
         mits = r.get("mitsuba") or {}
         ratio = r.get("speed_ratio")
+        size = r.get("size") or r.get("size_override")
         lines.append("| " + " | ".join([
             f"`{r['scene']}`",
+            f"{size[0]}x{size[1]}" if size else "—",
             str(r["spp"]),
             str(r["seeds"]),
             f"{welch['rejecting']} / {welch['tests']}" if welch else "—",
@@ -344,6 +569,13 @@ def markdown(settings: dict, rows: list) -> str:
             f"{ratio:.2f}" if ratio is not None else "—",
             r["verdict"],
         ]) + " |")
+        for override in r.get("overrides") or []:
+            notes.append(f"- `{r['scene']}`: {override}.")
+        if r.get("error"):
+            notes.append(f"- `{r['scene']}`: {r['verdict']}: "
+                         f"{r.get('error_brief') or shorten(r['error'])}")
+    if notes:
+        lines += ["", "Overrides and errors (full messages in crosscheck.json):", "", *notes]
     lines.append("")
     lines.append(f"Generated {settings['date']} on {settings['machine']} "
                  f"({settings['cpus']} cores).")
@@ -360,15 +592,50 @@ def build() -> None:
         sys.exit(EXIT_SETUP)
 
 
-def crosscheck(path: Path, args, seeds: list) -> dict:
+def crosscheck(path: Path, args, row: dict) -> dict:
+    """Renders one scene with both renderers (each on its own copy when the plan changes it)
+    and fills in `row`; the copies are removed whatever happens."""
+    copies = []
+    try:
+        plan = plan_scene(path, row["size_override"])
+        row["rfilter"] = plan["rfilter"]
+        row["overrides"] = plan["notes"]
+        for note in plan["notes"]:
+            print(f"{row['scene']}: {note}", file=sys.stderr)
+        mitsuba_path = ours_path = path
+        if plan["mitsuba"]:
+            mitsuba_path = write_scene_copy(path, plan["mitsuba"], "mitsuba")
+            copies.append(mitsuba_path)
+        if plan["ours"] and not args.mitsuba_only:
+            ours_path = write_scene_copy(path, plan["ours"], "ours")
+            copies.append(ours_path)
+        return compare(path, mitsuba_path, ours_path, plan["our_args"], args, row)
+    finally:
+        for copy in copies:
+            copy.unlink(missing_ok=True)
+
+
+def compare(path: Path, mitsuba_path: Path, ours_path: Path, our_args: list, args,
+            row: dict) -> dict:
     import numpy as np
 
-    row = {"scene": label(path), "path": str(path), "spp": args.spp, "seeds": len(seeds)}
-    print(f"{row['scene']}: Mitsuba, {len(seeds)} x {args.spp} spp", file=sys.stderr)
-    mits = render_mitsuba(path, args.spp, seeds)
+    spp, seeds = row["spp"], list(range(row["seeds"]))
+    print(f"{row['scene']}: Mitsuba, {len(seeds)} x {spp} spp", file=sys.stderr)
+    try:
+        mits = render_mitsuba(mitsuba_path, spp, seeds)
+    except Exception as e:  # a scene Mitsuba cannot load must not hide the others
+        message = unmask(f"{type(e).__name__}: {e}", mitsuba_path, path)
+        row["error"] = message
+        row["verdict"] = "could not be rendered (Mitsuba)"
+        row["error_brief"] = shorten(message)
+        print(f"  {message}", file=sys.stderr)
+        return row
     height, width = mits["images"].shape[1:3]
     row["size"] = [int(width), int(height)]
-    row["mitsuba"] = {"samples_per_s": mits["samples_per_s"], "seconds": mits["seconds"]}
+    row["mitsuba"] = {"samples_per_s": mits["samples_per_s"], "seconds": mits["seconds"],
+                      "load_s": mits["load_s"]}
+    print(f"  Mitsuba: load {mits['load_s']:.2f} s, render "
+          f"{', '.join(f'{t:.2f}' for t in mits['seconds'])} s", file=sys.stderr)
     stem = label(path).replace("/", "_").replace(".._", "").removesuffix(".xml")
     images = args.out / "images"
     write_image_atomic(images / f"{stem}.mitsuba.exr", mits["images"].mean(axis=0))
@@ -376,13 +643,15 @@ def crosscheck(path: Path, args, seeds: list) -> dict:
         row["verdict"] = "Mitsuba only"
         return row
 
-    print(f"{row['scene']}: fireflies, {len(seeds)} x {args.spp} spp", file=sys.stderr)
+    print(f"{row['scene']}: fireflies, {len(seeds)} x {spp} spp", file=sys.stderr)
     try:
-        ours = render_ours(args.binary, path, args.spp, seeds, args.threads)
+        ours = render_ours(args.binary, ours_path, spp, seeds, args.threads, our_args)
     except (RuntimeError, OSError, ValueError, KeyError) as e:
-        row["error"] = str(e)
-        row["verdict"] = "ERROR: render failed"
-        print(f"  {e}", file=sys.stderr)
+        message = unmask(str(e), ours_path, path)
+        row["error"] = message
+        row["error_brief"] = shorten(unmask(getattr(e, "brief", message), ours_path, path))
+        row["verdict"] = "could not be rendered (ours)"
+        print(f"  {message}", file=sys.stderr)
         return row
     row["ours"] = {k: ours[k] for k in
                    ("samples_per_s", "seconds", "reported_samples_per_s", "invalid_samples")}
@@ -407,18 +676,37 @@ def crosscheck(path: Path, args, seeds: list) -> dict:
     return row
 
 
+def parse_size(text: str):
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 160x90, got {text!r}")
+    if width < 1 or height < 1:
+        raise argparse.ArgumentTypeError(f"size must be positive, got {text!r}")
+    return (width, height)
+
+
 def main() -> None:
     global FAMILY_ALPHA
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("scene_args", nargs="*", metavar="SCENE", type=Path,
-                        help="scene files (default: experiments/scenes/*.xml)")
+                        help="scene files (default: experiments/scenes/*.xml, "
+                             "experiments/scenes/features/*.xml and "
+                             "experiments/scenes/living-room/scene.xml)")
     parser.add_argument("--scenes", nargs="+", type=Path, default=[], metavar="SCENE",
                         help="scene files, as the positional arguments")
-    parser.add_argument("--spp", type=int, help=f"samples per pixel (default {DEFAULT_SPP}; "
-                                                f"{QUICK_SPP} with --quick)")
-    parser.add_argument("--seeds", type=int, help=f"independent renders per renderer "
-                                                  f"(default {DEFAULT_SEEDS}; {QUICK_SEEDS} "
-                                                  f"with --quick)")
+    parser.add_argument("--spp", type=int, help=f"samples per pixel, all scenes (default "
+                                                f"{DEFAULT_SPP}, {QUICK_SPP} with --quick, "
+                                                f"or the scene's SCENE_SETTINGS)")
+    parser.add_argument("--seeds", type=int, help=f"independent renders per renderer, all "
+                                                  f"scenes (default {DEFAULT_SEEDS}, "
+                                                  f"{QUICK_SEEDS} with --quick, or the "
+                                                  f"scene's SCENE_SETTINGS)")
+    parser.add_argument("--size", type=parse_size, metavar="WxH",
+                        help="film size for every scene, written into both renderers' copies "
+                             "(default: the scene's own, or its SCENE_SETTINGS)")
+    parser.add_argument("--no-scene-settings", action="store_true",
+                        help="ignore SCENE_SETTINGS (render e.g. living-room at full size)")
     parser.add_argument("--block", type=int, default=DEFAULT_BLOCK,
                         help=f"block size in pixels (default {DEFAULT_BLOCK})")
     parser.add_argument("--threads", type=int, default=os.cpu_count() or 1,
@@ -441,13 +729,9 @@ def main() -> None:
     if not 0.0 < args.alpha < 1.0:
         parser.error(f"--alpha must be in (0, 1), got {args.alpha}")
     FAMILY_ALPHA = args.alpha
-    if args.spp is None:
-        args.spp = QUICK_SPP if args.quick else DEFAULT_SPP
-    if args.seeds is None:
-        args.seeds = QUICK_SEEDS if args.quick else DEFAULT_SEEDS
-    if args.spp < 1 or args.block < 1 or args.threads < 1:
+    if (args.spp is not None and args.spp < 1) or args.block < 1 or args.threads < 1:
         parser.error("--spp, --block and --threads must be positive")
-    if args.seeds < 2:
+    if args.seeds is not None and args.seeds < 2:
         parser.error("--seeds must be at least 2 (the t-test needs a variance)")
     scenes = [*args.scene_args, *args.scenes] or default_scenes()
     if not scenes:
@@ -475,7 +759,6 @@ def main() -> None:
     mi.set_log_level(mi.LogLevel.Warn)
     dr.set_thread_count(args.threads)
 
-    seeds = list(range(args.seeds))
     rows = []
     with tempfile.TemporaryDirectory(prefix="fireflies-crosscheck-bin-") as bindir:
         if not args.mitsuba_only:
@@ -484,12 +767,17 @@ def main() -> None:
             original, args.binary = args.binary, Path(bindir) / args.binary.name
             shutil.copy2(original, args.binary)
         for path in scenes:
+            run = scene_run_settings(path, args)
+            row = {"scene": label(path), "name": scene_name(path), "path": str(path),
+                   "spp": run["spp"], "seeds": run["seeds"],
+                   "size_override": list(run["size"]) if run["size"] else None}
             try:
-                rows.append(crosscheck(path, args, seeds))
-            except Exception as e:  # a scene Mitsuba cannot load must not hide the others
-                rows.append({"scene": label(path), "path": str(path), "spp": args.spp,
-                             "seeds": args.seeds, "error": f"{type(e).__name__}: {e}",
-                             "verdict": "ERROR: Mitsuba"})
+                rows.append(crosscheck(path, args, row))
+            except Exception as e:  # e.g. XML we cannot parse: must not hide the others
+                row["error"] = f"{type(e).__name__}: {e}"
+                row["error_brief"] = shorten(row["error"])
+                row["verdict"] = "could not be rendered (scene)"
+                rows.append(row)
                 print(f"  {type(e).__name__}: {e}", file=sys.stderr)
         if not args.mitsuba_only:
             args.binary = original
@@ -503,8 +791,11 @@ def main() -> None:
         "drjit": dr.__version__,
         "variant": VARIANT,
         "threads": args.threads,
-        "spp": args.spp,
+        "spp": args.spp,  # None: per scene (see each scene's spp and seeds)
         "seeds": args.seeds,
+        "quick": args.quick,
+        "size": list(args.size) if args.size else None,
+        "scene_settings": None if args.no_scene_settings else SCENE_SETTINGS,
         "block": args.block,
         "family_alpha": FAMILY_ALPHA,
         "mitsuba_only": args.mitsuba_only,

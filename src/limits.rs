@@ -99,6 +99,15 @@ impl MemoryLimit {
     }
 }
 
+/// The process's peak resident memory (`VmHWM` in `/proc/self/status`, Linux); `None`
+/// elsewhere. Reported by long commands so that memory claims are measured, not estimated.
+pub fn peak_rss_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = text.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
 /// Physical memory from `/proc/meminfo` (Linux); `None` elsewhere.
 fn physical_memory() -> Option<u64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;

@@ -45,6 +45,7 @@ fn mesh(positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> GeometryDesc {
     GeometryDesc::Mesh(MeshDesc {
         positions,
         normals: None,
+        uvs: None,
         indices,
     })
 }
@@ -238,6 +239,7 @@ fn triangle_shading_normals_interpolate_and_stay_in_front_hemisphere() {
     let g = GeometryDesc::Mesh(MeshDesc {
         positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
         normals: Some(vec![Vec3::Z, tilt, Vec3::Z]),
+        uvs: None,
         indices: vec![[0, 1, 2]],
     });
     let tri = one(0, &g);
@@ -250,6 +252,7 @@ fn triangle_shading_normals_interpolate_and_stay_in_front_hemisphere() {
     let g = GeometryDesc::Mesh(MeshDesc {
         positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
         normals: Some(vec![-Vec3::Z; 3]),
+        uvs: None,
         indices: vec![[0, 1, 2]],
     });
     let h = one(0, &g)

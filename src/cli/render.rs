@@ -42,9 +42,21 @@ pub struct RenderArgs {
     /// `pixel_<x>_<y>.txt` (readable by `fireflies eval`).
     #[arg(long, value_name = "X,Y;...")]
     dump_pixels: Option<String>,
+    /// Reconstruction filter override: `box` renders a scene whose film asks for another filter
+    /// (tent, gaussian, ...) with a box filter, so that every sample belongs to one pixel;
+    /// `render.json` records what the scene asked for. Without it such a scene is an error.
+    #[arg(long, value_enum)]
+    rfilter: Option<FilterOverride>,
     /// Exposure multiplier of the PNG previews (the EXR files are linear and unscaled).
     #[arg(long, default_value_t = 1.0)]
     exposure: f32,
+}
+
+/// The reconstruction filters `--rfilter` may force.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum FilterOverride {
+    /// A box of one pixel: each sample counts for the pixel it was taken in.
+    Box,
 }
 
 /// Splits `mean,gmonb:M=21,threshold=0.3,gmon` into specs: an item without `:` that holds
@@ -114,7 +126,12 @@ pub fn run(args: &RenderArgs, memory: MemoryLimit) -> Result<ExitCode> {
         ));
     }
     let threads = limits::threads(args.threads)?;
-    let scene = mitsuba::load_file(&args.scene)?;
+    let load_start = Instant::now();
+    let options = mitsuba::LoadOptions {
+        box_filter: args.rfilter == Some(FilterOverride::Box),
+    };
+    let scene = mitsuba::load_file_with(&args.scene, options)?;
+    let load_s = load_start.elapsed().as_secs_f64();
     let estimators = parse_estimator_list(&args.estimators)?;
     let cfg = FilmConfig {
         estimators,
@@ -187,6 +204,12 @@ pub fn run(args: &RenderArgs, memory: MemoryLimit) -> Result<ExitCode> {
         "threads": pool.current_num_threads(),
         "estimators": cfg.estimators.iter().map(ToString::to_string).collect::<Vec<_>>(),
         "checkpoints": cfg.checkpoints,
+        "rfilter": {
+            "used": "box",
+            "scene_asked_for": scene.camera.replaced_filter.as_deref().unwrap_or("box"),
+            "override": scene.camera.replaced_filter.is_some(),
+        },
+        "load_s": load_s,
         "wall_s": wall_s,
         "build_s": build_s,
         "estimate_s": out.estimate_seconds,
@@ -197,6 +220,7 @@ pub fn run(args: &RenderArgs, memory: MemoryLimit) -> Result<ExitCode> {
             .map(|(s, b)| (s.to_string(), serde_json::json!(b)))
             .collect::<serde_json::Map<_, _>>(),
         "images": written,
+        "peak_rss_bytes": limits::peak_rss_bytes(),
         "git_commit": git_commit(),
     });
     let text = serde_json::to_string_pretty(&report).unwrap_or_default();

@@ -1,6 +1,8 @@
 //! RGB images: the film's output, read back for comparisons. EXR holds linear floats; PNG is a
 //! tone-mapped preview for people. Both are written atomically.
 
+pub mod read;
+
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
 use std::io::Cursor;

@@ -8,6 +8,7 @@
 //! smooth (non-delta) lobe; an emitter hit after a delta bounce, or seen directly, has MIS weight
 //! 1; roulette runs after a bounce once the incremented `depth ≥ rr_depth`, survives with `min(max(β)·η², 0.95)`.
 
+use super::bsdfs::SurfacePoint;
 use super::sampler::SampleStream;
 use super::sampling::{Frame, power_heuristic};
 use super::scene::Rgb;
@@ -71,11 +72,11 @@ pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
 
     loop {
         let Some(hit) = world.bvh.intersect(&ray, tmin, tmax) else {
-            if let Some(le) = lights.environment() {
+            if let Some((le, light_pdf)) = lights.environment(ray.d) {
                 let w = if prev_delta {
                     1.0
                 } else {
-                    power_heuristic(prev_pdf, lights.pdf_environment())
+                    power_heuristic(prev_pdf, light_pdf)
                 };
                 result += beta * w * le;
             }
@@ -96,7 +97,8 @@ pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
 
         let frame = Frame::new(hit.ns);
         let wi = frame.to_local(-ray.d);
-        let bsdf = &world.bsdfs[hit.shape as usize];
+        let bsdf = &*world.bsdfs[hit.shape as usize];
+        let at = SurfacePoint { uv: hit.uv };
 
         // Next-event estimation.
         let u_choice = rng.next_1d();
@@ -104,7 +106,7 @@ pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
         if bsdf.has_smooth_lobe() {
             if let Some(ls) = lights.sample(hit.p, u_choice, u_light) {
                 let wo = frame.to_local(ls.wi);
-                let (f, bsdf_pdf) = bsdf.eval_pdf(wi, wo);
+                let (f, bsdf_pdf) = bsdf.eval_pdf(&at, wi, wo);
                 if f.max_element() > 0.0 {
                     let (shadow, dist) = shadow_ray(&hit, ls.wi, ls.dist);
                     if !world.bvh.occluded(&shadow, 0.0, dist) {
@@ -122,7 +124,7 @@ pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
         // BSDF sampling.
         let u_lobe = rng.next_1d();
         let u_dir = rng.next_2d();
-        let Some(bs) = bsdf.sample(wi, u_lobe, u_dir) else {
+        let Some(bs) = bsdf.sample(&at, wi, u_lobe, u_dir) else {
             break;
         };
         let d = frame.to_world(bs.wo).normalize();

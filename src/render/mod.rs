@@ -2,21 +2,25 @@
 //!
 //! Layers, top to bottom: [`film`] (per-pixel estimator banks) and [`integrator`] (unidirectional
 //! path tracing with next-event estimation and MIS) over [`world`] (the built scene: [`bvh`],
-//! [`shapes`], [`light`], [`camera`], [`bsdf`]) over [`scene`] (plain description, produced by
-//! [`mitsuba`] from XML, with [`obj`] reading meshes) and [`sampling`] (warps and frames).
+//! [`camera`], and the plugins) over [`scene`] (plain description, produced by [`mitsuba`] from
+//! XML) and [`sampling`] (warps and frames).
+//!
+//! Plugins have one home each: [`bsdfs`], [`textures`], [`emitters`] and [`shapes`] hold one file
+//! per Mitsuba plugin, with its parameter reading and its maths; the loader dispatches to them
+//! from one table ([`mitsuba::table`]).
 
-pub mod bsdf;
+pub mod bsdfs;
 pub mod bvh;
 pub mod camera;
+pub mod emitters;
 pub mod film;
 pub mod integrator;
-pub mod light;
 pub mod mitsuba;
-pub mod obj;
 pub mod sampler;
 pub mod sampling;
 pub mod scene;
 pub mod shapes;
+pub mod textures;
 pub mod world;
 
-pub use scene::{BsdfDesc, CameraDesc, GeometryDesc, IntegratorDesc, Rgb, SceneDesc, ShapeDesc};
+pub use scene::{CameraDesc, GeometryDesc, IntegratorDesc, Rgb, SceneDesc, ShapeDesc};

@@ -4,13 +4,16 @@
 //! renderable world (BVH, lights, camera) from it. Keeping the two apart lets tests build scenes
 //! in code and lets the loader be tested without rendering.
 
-use glam::{Mat4, Vec3};
+use super::bsdfs::Bsdf;
+use super::emitters::Emitter;
+use glam::{Mat4, Vec2, Vec3};
+use std::sync::Arc;
 
 /// Linear RGB radiance, reflectance or weight.
 pub type Rgb = Vec3;
 
 /// Everything a render needs, as read from a scene file.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct SceneDesc {
     /// The `path` integrator's settings.
     pub integrator: IntegratorDesc,
@@ -18,10 +21,9 @@ pub struct SceneDesc {
     pub camera: CameraDesc,
     /// Shapes in file order; each may carry an area emitter.
     pub shapes: Vec<ShapeDesc>,
-    /// `point` emitters.
-    pub point_lights: Vec<PointLightDesc>,
-    /// The `constant` emitter's radiance, if any (at most one).
-    pub environment: Option<Rgb>,
+    /// Emitters that are not attached to a shape (`point`, `constant`, `envmap`; at most one
+    /// of them at infinity).
+    pub emitters: Vec<Arc<dyn Emitter>>,
 }
 
 /// Mitsuba's `path` integrator parameters, with Mitsuba's meaning.
@@ -59,7 +61,7 @@ pub enum FovAxis {
 }
 
 /// A `perspective` sensor with an `hdrfilm` (box filter) and an `independent` sampler.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct CameraDesc {
     /// Camera to world; the camera looks down its local `+z`, local `+x` is image left and
     /// local `+y` image up (Mitsuba's convention, as `lookat` builds it).
@@ -74,6 +76,9 @@ pub struct CameraDesc {
     pub height: u32,
     /// The sampler's `sample_count` (a default the command line may override).
     pub spp: u32,
+    /// The reconstruction filter the file asked for when the `--rfilter box` override replaced
+    /// it (`None`: the file asked for a box filter).
+    pub replaced_filter: Option<String>,
     /// Distance of the near clipping plane along the view axis (Mitsuba's default 0.01).
     pub near_clip: f32,
     /// Distance of the far clipping plane along the view axis (Mitsuba's default 10000).
@@ -81,12 +86,12 @@ pub struct CameraDesc {
 }
 
 /// One shape with its material and optional area emitter.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct ShapeDesc {
     /// Geometry in world space (transforms already applied where the shape allows).
     pub geometry: GeometryDesc,
     /// Its BSDF (Mitsuba's default is a diffuse BSDF of reflectance 0.5).
-    pub bsdf: BsdfDesc,
+    pub bsdf: Arc<dyn Bsdf>,
     /// Radiance of its `area` emitter, emitted from the front side only.
     pub emission: Option<Rgb>,
 }
@@ -120,58 +125,8 @@ pub struct MeshDesc {
     pub positions: Vec<Vec3>,
     /// Per-vertex shading normals (unit length), or `None` for flat shading.
     pub normals: Option<Vec<Vec3>>,
+    /// Per-vertex texture coordinates, if the mesh has them.
+    pub uvs: Option<Vec<Vec2>>,
     /// Triangles as vertex indices; counter-clockwise seen from the front.
     pub indices: Vec<[u32; 3]>,
-}
-
-/// The supported BSDFs, with Mitsuba's parameters and defaults already applied.
-#[derive(Debug, Clone, PartialEq)]
-pub enum BsdfDesc {
-    /// Lambertian, one-sided.
-    Diffuse {
-        /// Albedo (Mitsuba's default 0.5).
-        reflectance: Rgb,
-    },
-    /// Perfect mirror (`conductor` with `material="none"`), one-sided.
-    Conductor {
-        /// Tint (Mitsuba's default 1).
-        specular_reflectance: Rgb,
-    },
-    /// GGX microfacet mirror (`roughconductor`, `material="none"`), one-sided.
-    RoughConductor {
-        /// GGX roughness `alpha` (isotropic).
-        alpha: f32,
-        /// Tint (Mitsuba's default 1).
-        specular_reflectance: Rgb,
-    },
-    /// Smooth glass interface, two-sided by nature.
-    Dielectric {
-        /// Interior index of refraction (Mitsuba's default `bk7` = 1.5046).
-        int_ior: f32,
-        /// Exterior index of refraction (Mitsuba's default `air` = 1.000277).
-        ext_ior: f32,
-        /// Reflection tint (Mitsuba's default 1).
-        specular_reflectance: Rgb,
-        /// Transmission tint (Mitsuba's default 1).
-        specular_transmittance: Rgb,
-    },
-    /// The nested BSDF on both sides.
-    TwoSided(Box<BsdfDesc>),
-}
-
-impl Default for BsdfDesc {
-    fn default() -> Self {
-        BsdfDesc::Diffuse {
-            reflectance: Rgb::splat(0.5),
-        }
-    }
-}
-
-/// A `point` emitter.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PointLightDesc {
-    /// Position in world space.
-    pub position: Vec3,
-    /// Radiant intensity (W/sr per channel).
-    pub intensity: Rgb,
 }

@@ -1,11 +1,12 @@
 //! The renderable scene built from a [`SceneDesc`]: BVH, per-shape BSDFs, emitters, camera.
 
-use super::bsdf::Bsdf;
+use super::bsdfs::Bsdf;
 use super::bvh::Bvh;
 use super::camera::Camera;
-use super::light::Lights;
+use super::emitters::Lights;
 use super::scene::{IntegratorDesc, SceneDesc};
 use super::shapes::primitives;
+use std::sync::Arc;
 
 /// Everything the integrator reads; immutable while rendering, shared by all threads.
 #[derive(Debug)]
@@ -13,7 +14,7 @@ pub struct World {
     /// Acceleration structure over every primitive of every shape.
     pub bvh: Bvh,
     /// One BSDF per shape, indexed by the shape index a hit carries.
-    pub bsdfs: Vec<Bsdf>,
+    pub bsdfs: Vec<Arc<dyn Bsdf>>,
     /// The emitters.
     pub lights: Lights,
     /// The sensor.
@@ -32,11 +33,7 @@ impl World {
         let bvh = Bvh::build(prims);
         World {
             bvh,
-            bsdfs: scene
-                .shapes
-                .iter()
-                .map(|s| Bsdf::from_desc(&s.bsdf))
-                .collect(),
+            bsdfs: scene.shapes.iter().map(|s| s.bsdf.clone()).collect(),
             lights: Lights::new(scene),
             camera: Camera::new(&scene.camera),
             integrator: scene.integrator,

@@ -1,5 +1,6 @@
-//! Rays, the primitives the BVH holds, their intersection tests, and whole-shape sampling for
-//! next-event estimation.
+//! Shapes: rays, the primitives the BVH holds, their intersection tests, and whole-shape
+//! sampling for next-event estimation; one file per Mitsuba shape plugin reads its parameters
+//! into a [`GeometryDesc`] ([`mesh`] builds the meshes, [`obj_file`] reads OBJ files).
 //!
 //! Orientation follows [`super::scene`]: a triangle's front is where
 //! `(p1 − p0) × (p2 − p0)` points, a sphere's front is its outside and a disk's front is the image
@@ -9,6 +10,14 @@
 //! Triangles use the watertight test of Woop, Benthin and Wald (JCGT 2013): the per-ray shear
 //! is computed once ([`RayPre`]), edge functions that come out exactly zero are recomputed in
 //! double precision, so a ray through a shared edge or vertex never slips between triangles.
+
+pub mod cube;
+pub mod disk;
+pub mod mesh;
+pub mod obj;
+pub mod obj_file;
+pub mod rectangle;
+pub mod sphere;
 
 use super::sampling::{self, Frame};
 use super::scene::{GeometryDesc, MeshDesc};
@@ -52,6 +61,8 @@ pub struct Hit {
     pub ns: Vec3,
     /// Index of the shape in the scene.
     pub shape: u32,
+    /// Texture coordinates (interpolated on meshes that have them, else `(0, 0)`).
+    pub uv: Vec2,
 }
 
 /// Per-ray data shared by every primitive test of one traversal: the origin, the direction
@@ -120,6 +131,15 @@ pub struct DiskData {
     normal: Vec3,
 }
 
+/// What a triangle interpolates besides its position.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TriangleAttrs {
+    /// Vertex shading normals.
+    pub n: Option<[Vec3; 3]>,
+    /// Vertex texture coordinates.
+    pub uv: Option<[Vec2; 3]>,
+}
+
 /// One intersectable primitive; each carries the index of the shape it belongs to.
 #[derive(Debug, Clone)]
 pub enum Primitive {
@@ -127,8 +147,9 @@ pub enum Primitive {
     Triangle {
         /// Vertices.
         p: [Vec3; 3],
-        /// Vertex shading normals, if the mesh has them.
-        n: Option<Box<[Vec3; 3]>>,
+        /// Vertex shading normals and texture coordinates, if the mesh has them (out of line,
+        /// so that a flat untextured triangle stays small).
+        attrs: Option<Box<TriangleAttrs>>,
         /// Shape index.
         shape: u32,
     },
@@ -158,9 +179,15 @@ pub fn primitives(shape: u32, g: &GeometryDesc) -> Vec<Primitive> {
             .map(|(idx, p)| {
                 let n = m.normals.as_ref().and_then(|ns| {
                     let get = |i: u32| ns.get(i as usize).copied();
-                    Some(Box::new([get(idx[0])?, get(idx[1])?, get(idx[2])?]))
+                    Some([get(idx[0])?, get(idx[1])?, get(idx[2])?])
                 });
-                Primitive::Triangle { p, n, shape }
+                let uv = m.uvs.as_ref().and_then(|uvs| {
+                    let get = |i: u32| uvs.get(i as usize).copied();
+                    Some([get(idx[0])?, get(idx[1])?, get(idx[2])?])
+                });
+                let attrs =
+                    (n.is_some() || uv.is_some()).then(|| Box::new(TriangleAttrs { n, uv }));
+                Primitive::Triangle { p, attrs, shape }
             })
             .collect(),
         &GeometryDesc::Sphere { center, radius } => {
@@ -289,7 +316,7 @@ impl Primitive {
     /// The hit record of an intersection this primitive reported for `ray`.
     pub fn finish(&self, ray: &Ray, h: &RawHit) -> Hit {
         match self {
-            Primitive::Triangle { p, n, shape } => {
+            Primitive::Triangle { p, attrs, shape } => {
                 let det = h.a + h.b + h.c;
                 let inv = 1.0 / det;
                 let (b0, b1, b2) = (h.a * inv, h.b * inv, h.c * inv);
@@ -310,7 +337,12 @@ impl Primitive {
                     .try_normalize()
                     .or_else(|| triangle_normal(p))
                     .unwrap_or(Vec3::Z);
-                let ns = match n {
+                let normals = attrs.as_ref().and_then(|a| a.n.as_ref());
+                let uv = match attrs.as_ref().and_then(|a| a.uv.as_ref()) {
+                    Some(uv) => uv[0] * b0 + uv[1] * b1 + uv[2] * b2,
+                    None => Vec2::ZERO,
+                };
+                let ns = match normals {
                     Some(n) => match (n[0] * b0 + n[1] * b1 + n[2] * b2).try_normalize() {
                         Some(s) if s.dot(ng) < 0.0 => -s,
                         Some(s) => s,
@@ -324,6 +356,7 @@ impl Primitive {
                     ng,
                     ns,
                     shape: *shape,
+                    uv,
                 }
             }
             &Primitive::Sphere {
@@ -346,6 +379,7 @@ impl Primitive {
                     ng,
                     ns: ng,
                     shape,
+                    uv: Vec2::ZERO,
                 }
             }
             Primitive::Disk { disk, shape } => {
@@ -356,6 +390,7 @@ impl Primitive {
                     ng: disk.normal,
                     ns: disk.normal,
                     shape: *shape,
+                    uv: Vec2::ZERO,
                 }
             }
         }

@@ -15,7 +15,7 @@
 use crate::limits::shorten;
 use std::collections::HashMap;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// An OBJ file as one triangle mesh in the file's own coordinates.
 #[derive(Debug, Clone, PartialEq)]
@@ -24,6 +24,9 @@ pub struct ObjMesh {
     pub positions: Vec<Vec3>,
     /// Unit vertex normals from `vn`, when the faces give them (all faces or none).
     pub normals: Option<Vec<Vec3>>,
+    /// Texture coordinates from `vt`, when any face vertex gives one (those that do not get
+    /// `(0, 0)`), with `v` flipped to `1 − v` as Mitsuba's OBJ loader does.
+    pub uvs: Option<Vec<Vec2>>,
     /// Triangles as vertex indices, in the file's winding.
     pub indices: Vec<[u32; 3]>,
     /// Per vertex, the 1-based line of its `v` statement, so that a later check on a vertex
@@ -59,8 +62,8 @@ struct Corner {
 struct Reader {
     /// `v` positions with their lines.
     v: Vec<(Vec3, usize)>,
-    /// Number of `vt` statements (their values are not used, but faces index them).
-    vt_count: usize,
+    /// `vt` texture coordinates, as written.
+    vt: Vec<Vec2>,
     /// `vn` normals, unit length.
     vn: Vec<Vec3>,
     /// Mesh vertex of each distinct corner: a hash map, so that deduplication is linear in the
@@ -83,7 +86,7 @@ struct Reader {
 /// not an integer, or faces of which some give normals and others do not.
 ///
 /// ```
-/// use fireflies::render::obj::parse;
+/// use fireflies::render::shapes::obj_file::parse;
 ///
 /// let mesh = parse(b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n").unwrap();
 /// assert_eq!(mesh.indices, vec![[0, 1, 2], [0, 2, 3]]);
@@ -171,8 +174,8 @@ impl Reader {
                 self.v.push((Vec3::new(x, y, z), line));
             }
             b"vt" => {
-                numbers(&mut tokens, 2, "texture coordinate")?;
-                self.vt_count = self.vt_count.saturating_add(1);
+                let [u, v, _] = numbers(&mut tokens, 2, "texture coordinate")?;
+                self.vt.push(Vec2::new(u, v));
             }
             b"vn" => {
                 let [x, y, z] = numbers(&mut tokens, 3, "vertex normal")?;
@@ -250,7 +253,7 @@ impl Reader {
         Ok(Corner {
             v: index(v, self.v.len(), "vertex")?,
             vt: vt
-                .map(|t| index(t, self.vt_count, "texture coordinate"))
+                .map(|t| index(t, self.vt.len(), "texture coordinate"))
                 .transpose()?,
             vn: vn
                 .map(|n| index(n, self.vn.len(), "vertex normal"))
@@ -264,6 +267,8 @@ impl Reader {
         let mut positions = Vec::with_capacity(self.corners.len());
         let mut lines = Vec::with_capacity(self.corners.len());
         let mut normals = Vec::with_capacity(if with_normals { self.corners.len() } else { 0 });
+        let with_uvs = self.corners.iter().any(|c| c.vt.is_some());
+        let mut uvs = Vec::with_capacity(if with_uvs { self.corners.len() } else { 0 });
         for corner in &self.corners {
             // Indices were checked against the lists when the corner was read.
             let (p, line) = self.v[corner.v as usize];
@@ -272,10 +277,15 @@ impl Reader {
             if let Some(n) = corner.vn {
                 normals.push(self.vn[n as usize]);
             }
+            if with_uvs {
+                let uv = corner.vt.map_or(Vec2::ZERO, |t| self.vt[t as usize]);
+                uvs.push(Vec2::new(uv.x, 1.0 - uv.y));
+            }
         }
         ObjMesh {
             positions,
             normals: with_normals.then_some(normals),
+            uvs: with_uvs.then_some(uvs),
             indices: self.indices,
             lines,
         }

@@ -1,0 +1,135 @@
+//! Mitsuba's `dielectric`: a smooth glass interface, two-sided by nature. Exact unpolarised
+//! Fresnel; reflection is chosen with probability `F`; the transmission weight is scaled by
+//! `(1/η_it)²` (radiance transport: radiance is compressed into the smaller solid angle of the
+//! denser medium), as in Mitsuba's radiance mode.
+
+use super::{Bsdf, BsdfSample, NONE, SurfacePoint, reflect_z};
+use crate::error::Result;
+use crate::render::mitsuba::Params;
+use crate::render::scene::Rgb;
+use crate::render::textures::Spectrum;
+use glam::{Vec2, Vec3};
+use std::sync::Arc;
+
+/// Mitsuba's default interior index (`bk7`).
+pub const DEFAULT_INT_IOR: f32 = 1.5046;
+/// Mitsuba's default exterior index (`air`).
+pub const DEFAULT_EXT_IOR: f32 = 1.000277;
+
+/// A smooth dielectric interface.
+#[derive(Debug, Clone)]
+pub struct Dielectric {
+    /// `int_ior / ext_ior`.
+    pub eta: f32,
+    /// Reflection tint (Mitsuba's default 1).
+    pub specular_reflectance: Spectrum,
+    /// Transmission tint (Mitsuba's default 1).
+    pub specular_transmittance: Spectrum,
+}
+
+impl Dielectric {
+    /// Untinted glass of relative index `int_ior / ext_ior`.
+    pub fn new(int_ior: f32, ext_ior: f32) -> Dielectric {
+        Dielectric {
+            eta: int_ior / ext_ior,
+            specular_reflectance: Spectrum::grey(1.0),
+            specular_transmittance: Spectrum::grey(1.0),
+        }
+    }
+}
+
+/// Reads `<bsdf type="dielectric">`.
+pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
+    let int_ior = p.ior("int_ior")?;
+    let ext_ior = p.ior("ext_ior")?;
+    let reflect = p.texture("specular_reflectance")?;
+    let transmit = p.texture("specular_transmittance")?;
+    p.finish()?;
+    let int_ior = int_ior.map_or(DEFAULT_INT_IOR, |(v, _)| v);
+    let ext_ior = ext_ior.map_or(DEFAULT_EXT_IOR, |(v, _)| v);
+    Ok(Arc::new(Dielectric {
+        eta: int_ior / ext_ior,
+        specular_reflectance: reflect.map_or(Spectrum::grey(1.0), |(t, _)| t),
+        specular_transmittance: transmit.map_or(Spectrum::grey(1.0), |(t, _)| t),
+    }))
+}
+
+/// Unpolarised Fresnel reflectance of a smooth dielectric interface (Mitsuba's `fresnel`).
+///
+/// `cos_theta_i` is `wi.z` (its sign says which side `wi` is on: `≥ 0` is outside) and `eta` is
+/// `int_ior / ext_ior`. Returns `(F, cos_theta_t, eta_it, eta_ti)`:
+/// * `F` — reflectance (1 under total internal reflection, 0 for an index-matched interface);
+/// * `cos_theta_t` — signed cosine of the refracted direction (opposite sign to `cos_theta_i`,
+///   0 under total internal reflection);
+/// * `eta_it` — relative index `η_t/η_i` seen from `wi`'s side (`eta` outside, `1/eta` inside);
+/// * `eta_ti` — its reciprocal.
+pub fn fresnel_dielectric(cos_theta_i: f32, eta: f32) -> (f32, f32, f32, f32) {
+    let outside = cos_theta_i >= 0.0;
+    let (eta_it, eta_ti) = if outside {
+        (eta, 1.0 / eta)
+    } else {
+        (1.0 / eta, eta)
+    };
+    let cos_i = cos_theta_i.abs().min(1.0);
+    // Snell: sin θt = η_ti sin θi.
+    let cos_t_sqr = 1.0 - (1.0 - cos_i * cos_i) * (eta_ti * eta_ti);
+    if cos_t_sqr <= 0.0 {
+        // Total internal reflection.
+        return (1.0, 0.0, eta_it, eta_ti);
+    }
+    let cos_t = cos_t_sqr.sqrt();
+    let f = if eta == 1.0 {
+        0.0
+    } else if cos_i == 0.0 {
+        1.0
+    } else {
+        // Amplitude coefficients for s and p polarisation, both relative to the incident side.
+        let a_s = (cos_i - eta_it * cos_t) / (cos_i + eta_it * cos_t);
+        let a_p = (cos_t - eta_it * cos_i) / (cos_t + eta_it * cos_i);
+        0.5 * (a_s * a_s + a_p * a_p)
+    };
+    let cos_t_signed = if outside { -cos_t } else { cos_t };
+    (f, cos_t_signed, eta_it, eta_ti)
+}
+
+impl Bsdf for Dielectric {
+    fn has_smooth_lobe(&self) -> bool {
+        false
+    }
+
+    fn uses_uv(&self) -> bool {
+        self.specular_reflectance.is_textured() || self.specular_transmittance.is_textured()
+    }
+
+    fn transmits(&self) -> bool {
+        true
+    }
+
+    fn eval_pdf(&self, _at: &SurfacePoint, _wi: Vec3, _wo: Vec3) -> (Rgb, f32) {
+        NONE
+    }
+
+    fn sample(&self, at: &SurfacePoint, wi: Vec3, u_lobe: f32, _u: Vec2) -> Option<BsdfSample> {
+        let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(wi.z, self.eta);
+        if u_lobe < f {
+            // Reflection chosen with probability F: weight F·tint / F.
+            Some(BsdfSample {
+                wo: reflect_z(wi),
+                weight: self.specular_reflectance.eval(at.uv),
+                pdf: f32::INFINITY,
+                delta: true,
+                eta: 1.0,
+            })
+        } else {
+            // Transmission chosen with probability 1 − F; radiance scales by η_ti².
+            let wo = Vec3::new(-eta_ti * wi.x, -eta_ti * wi.y, cos_t);
+            Some(BsdfSample {
+                wo: wo.try_normalize().unwrap_or(wo),
+                weight: self.specular_transmittance.eval(at.uv) * (eta_ti * eta_ti),
+                pdf: f32::INFINITY,
+                delta: true,
+                eta: eta_it,
+            })
+        }
+    }
+}

@@ -1,0 +1,140 @@
+//! Emitters and next-event estimation. One file per Mitsuba emitter plugin: `area` (on shapes,
+//! front side only), `point`, `constant` and `envmap` (at infinity). An emitter is chosen
+//! uniformly, as Mitsuba does; the choice only changes variance, never the expected value.
+
+pub mod area;
+pub mod constant;
+pub mod envmap;
+pub mod point;
+
+use super::scene::{Rgb, SceneDesc};
+use area::AreaLight;
+use glam::{Vec2, Vec3};
+use std::fmt::Debug;
+use std::sync::Arc;
+
+/// A next-event sample: where the light comes from and what it brings.
+#[derive(Debug, Clone, Copy)]
+pub struct LightSample {
+    /// Unit direction from the shading point towards the emitter.
+    pub wi: Vec3,
+    /// Distance to the emitter point (`f32::INFINITY` for emitters at infinity).
+    pub dist: f32,
+    /// Incident radiance (for a point light, intensity / distance²).
+    pub radiance: Rgb,
+    /// Solid-angle density (1 for deltas: unused in MIS); [`Lights::sample`] includes the
+    /// emitter choice, an [`Emitter`] does not.
+    pub pdf: f32,
+    /// A point light: no other strategy can sample it.
+    pub delta: bool,
+}
+
+/// An emitter not attached to a shape.
+pub trait Emitter: Debug + Send + Sync {
+    /// A direction towards the emitter from `from`, drawn with `u`; `None` when it contributes
+    /// nothing.
+    fn sample(&self, from: Vec3, u: Vec2) -> Option<LightSample>;
+
+    /// Whether rays leaving the scene see it (an environment; at most one per scene).
+    fn is_infinite(&self) -> bool {
+        false
+    }
+
+    /// Radiance arriving along a ray that left the scene in direction `d`, and the density
+    /// with which [`Emitter::sample`] returns that direction.
+    fn eval_pdf_escaped(&self, _d: Vec3) -> (Rgb, f32) {
+        (Rgb::ZERO, 0.0)
+    }
+}
+
+/// All emitters of a scene.
+#[derive(Debug, Clone)]
+pub struct Lights {
+    /// Area emitters, in shape order.
+    area: Vec<AreaLight>,
+    /// Per shape: the index of its area emitter in `area`.
+    by_shape: Vec<Option<u32>>,
+    /// The other emitters, in file order.
+    others: Vec<Arc<dyn Emitter>>,
+    /// The one in `others` at infinity, if any.
+    environment: Option<Arc<dyn Emitter>>,
+}
+
+impl Lights {
+    /// The emitters of a scene description.
+    pub fn new(scene: &SceneDesc) -> Self {
+        let mut area = Vec::new();
+        let mut by_shape = Vec::with_capacity(scene.shapes.len());
+        for shape in &scene.shapes {
+            by_shape.push(shape.emission.map(|radiance| {
+                area.push(AreaLight::new(&shape.geometry, radiance));
+                (area.len() - 1) as u32
+            }));
+        }
+        let environment = scene.emitters.iter().find(|e| e.is_infinite()).cloned();
+        Lights {
+            area,
+            by_shape,
+            others: scene.emitters.clone(),
+            environment,
+        }
+    }
+
+    /// Whether the scene has no emitter at all (the image is black).
+    pub fn is_empty(&self) -> bool {
+        self.area.is_empty() && self.others.is_empty()
+    }
+
+    /// Probability of choosing any one emitter.
+    #[inline]
+    fn choice_pdf(&self) -> f32 {
+        1.0 / (self.area.len() + self.others.len()) as f32
+    }
+
+    /// The radiance leaving shape `shape` towards `-d` from a point with front normal `ng`
+    /// (zero from the back: area emitters emit from the front only).
+    #[inline]
+    pub fn emitted(&self, shape: u32, ng: Vec3, d: Vec3) -> Option<Rgb> {
+        let i = self.by_shape.get(shape as usize).copied().flatten()?;
+        self.area[i as usize].emitted(ng, d)
+    }
+
+    /// Density with which [`Lights::sample`] from `from` would have chosen the point `p`
+    /// (front normal `n`) on shape `shape`: what MIS weighs a BSDF-sampled hit against.
+    #[inline]
+    pub fn pdf_area_hit(&self, shape: u32, from: Vec3, p: Vec3, n: Vec3) -> f32 {
+        match self.by_shape.get(shape as usize).copied().flatten() {
+            Some(i) => self.choice_pdf() * self.area[i as usize].pdf_hit(from, p, n),
+            None => 0.0,
+        }
+    }
+
+    /// The environment's radiance along an escaping ray of direction `d`, if there is one,
+    /// with the density with which [`Lights::sample`] would have chosen that direction.
+    #[inline]
+    pub fn environment(&self, d: Vec3) -> Option<(Rgb, f32)> {
+        let (radiance, pdf) = self.environment.as_ref()?.eval_pdf_escaped(d);
+        Some((radiance, self.choice_pdf() * pdf))
+    }
+
+    /// Chooses an emitter with `u_choice` and a point or direction on it with `u`.
+    /// `None` when the choice contributes nothing (back side, degenerate sample).
+    #[inline]
+    pub fn sample(&self, from: Vec3, u_choice: f32, u: Vec2) -> Option<LightSample> {
+        let n = self.area.len() + self.others.len();
+        if n == 0 {
+            return None;
+        }
+        let i = ((u_choice * n as f32) as usize).min(n - 1);
+        let mut s = match self.area.get(i) {
+            Some(light) => light.sample(from, u)?,
+            None => self.others[i - self.area.len()].sample(from, u)?,
+        };
+        if !s.delta {
+            s.pdf *= self.choice_pdf();
+        } else {
+            s.pdf = self.choice_pdf();
+        }
+        Some(s)
+    }
+}
