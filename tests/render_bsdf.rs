@@ -7,9 +7,10 @@
 //! below describe how often a *correct* implementation would fail for a random choice of seeds.
 
 use fireflies::render::bsdfs::conductor::Conductor;
-use fireflies::render::bsdfs::dielectric::{Dielectric, fresnel_dielectric};
+use fireflies::render::bsdfs::dielectric::Dielectric;
 use fireflies::render::bsdfs::diffuse::Diffuse;
-use fireflies::render::bsdfs::ggx::MIN_ALPHA;
+use fireflies::render::bsdfs::fresnel::fresnel_dielectric;
+use fireflies::render::bsdfs::microfacet::MIN_ALPHA;
 use fireflies::render::bsdfs::roughconductor::RoughConductor;
 use fireflies::render::bsdfs::twosided::TwoSided;
 use fireflies::render::bsdfs::{self, BsdfSample, SurfacePoint};
@@ -102,9 +103,7 @@ impl Bsdf {
             } => Arc::new(RoughConductor::new(*alpha, *specular_reflectance)),
             BsdfDesc::Conductor {
                 specular_reflectance,
-            } => Arc::new(Conductor {
-                specular_reflectance: Spectrum::Constant(*specular_reflectance),
-            }),
+            } => Arc::new(Conductor::mirror(*specular_reflectance)),
             BsdfDesc::Dielectric {
                 int_ior,
                 ext_ior,
@@ -1097,7 +1096,10 @@ fn twosided_back_equals_front() {
 
 #[test]
 fn alpha_is_clamped_like_mitsuba() {
-    assert_eq!(RoughConductor::new(0.0, Rgb::ONE).ggx.alpha, MIN_ALPHA);
+    assert_eq!(
+        RoughConductor::new(0.0, Rgb::ONE).distribution.alpha_u(),
+        MIN_ALPHA
+    );
     // A near-zero roughness behaves as a mirror in expectation.
     let b = rough(0.0);
     let wi = incident(40.0);

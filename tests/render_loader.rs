@@ -15,7 +15,6 @@ use fireflies::render::integrator::radiance;
 use fireflies::render::mitsuba::{load_file, load_str};
 use fireflies::render::sampler::SampleStream;
 use fireflies::render::scene::{FovAxis, GeometryDesc, MeshDesc, SceneDesc};
-use fireflies::render::textures::Spectrum;
 use std::fmt::Debug;
 use std::sync::Arc;
 
@@ -323,9 +322,7 @@ fn bsdfs_defaults_refs_and_emitters() {
         &scene.shapes[2].bsdf,
         &Dielectric::new(1.3330, 1.000277)
     ));
-    let mirror = Conductor {
-        specular_reflectance: Spectrum::Constant(Vec3::ONE),
-    };
+    let mirror = Conductor::mirror(Vec3::ONE);
     assert!(same(&scene.shapes[3].bsdf, &TwoSided(Arc::new(mirror))));
     assert!(same(
         &scene.shapes[4].bsdf,

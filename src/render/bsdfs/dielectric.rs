@@ -3,6 +3,7 @@
 //! `(1/η_it)²` (radiance transport: radiance is compressed into the smaller solid angle of the
 //! denser medium), as in Mitsuba's radiance mode.
 
+use super::fresnel::fresnel_dielectric;
 use super::{Bsdf, BsdfSample, NONE, SurfacePoint, reflect_z};
 use crate::error::Result;
 use crate::render::mitsuba::Params;
@@ -52,44 +53,6 @@ pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
         specular_reflectance: reflect.map_or(Spectrum::grey(1.0), |(t, _)| t),
         specular_transmittance: transmit.map_or(Spectrum::grey(1.0), |(t, _)| t),
     }))
-}
-
-/// Unpolarised Fresnel reflectance of a smooth dielectric interface (Mitsuba's `fresnel`).
-///
-/// `cos_theta_i` is `wi.z` (its sign says which side `wi` is on: `≥ 0` is outside) and `eta` is
-/// `int_ior / ext_ior`. Returns `(F, cos_theta_t, eta_it, eta_ti)`:
-/// * `F` — reflectance (1 under total internal reflection, 0 for an index-matched interface);
-/// * `cos_theta_t` — signed cosine of the refracted direction (opposite sign to `cos_theta_i`,
-///   0 under total internal reflection);
-/// * `eta_it` — relative index `η_t/η_i` seen from `wi`'s side (`eta` outside, `1/eta` inside);
-/// * `eta_ti` — its reciprocal.
-pub fn fresnel_dielectric(cos_theta_i: f32, eta: f32) -> (f32, f32, f32, f32) {
-    let outside = cos_theta_i >= 0.0;
-    let (eta_it, eta_ti) = if outside {
-        (eta, 1.0 / eta)
-    } else {
-        (1.0 / eta, eta)
-    };
-    let cos_i = cos_theta_i.abs().min(1.0);
-    // Snell: sin θt = η_ti sin θi.
-    let cos_t_sqr = 1.0 - (1.0 - cos_i * cos_i) * (eta_ti * eta_ti);
-    if cos_t_sqr <= 0.0 {
-        // Total internal reflection.
-        return (1.0, 0.0, eta_it, eta_ti);
-    }
-    let cos_t = cos_t_sqr.sqrt();
-    let f = if eta == 1.0 {
-        0.0
-    } else if cos_i == 0.0 {
-        1.0
-    } else {
-        // Amplitude coefficients for s and p polarisation, both relative to the incident side.
-        let a_s = (cos_i - eta_it * cos_t) / (cos_i + eta_it * cos_t);
-        let a_p = (cos_t - eta_it * cos_i) / (cos_t + eta_it * cos_i);
-        0.5 * (a_s * a_s + a_p * a_p)
-    };
-    let cos_t_signed = if outside { -cos_t } else { cos_t };
-    (f, cos_t_signed, eta_it, eta_ti)
 }
 
 impl Bsdf for Dielectric {

@@ -26,9 +26,21 @@ impl Diffuse {
     }
 }
 
-/// Reads `<bsdf type="diffuse">`: `reflectance` (a colour or a texture; default 0.5).
+/// Reads `<bsdf type="diffuse">`: `reflectance` (a colour or a texture; default 0.5). Files
+/// older than Mitsuba 2 may call it `diffuse_reflectance`, which Mitsuba 3 renames.
 pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
-    let reflectance = p.texture("reflectance")?;
+    let mut reflectance = p.texture("reflectance")?;
+    if p.loader().upgrades_names() {
+        if let Some((old, at)) = p.texture("diffuse_reflectance")? {
+            if reflectance.is_some() {
+                return Err(p.err(
+                    Some(at),
+                    "diffuse_reflectance (the old name of reflectance) given as well",
+                ));
+            }
+            reflectance = Some((old, at));
+        }
+    }
     p.finish()?;
     Ok(Arc::new(Diffuse {
         reflectance: reflectance.map_or(Spectrum::grey(0.5), |(r, _)| r),

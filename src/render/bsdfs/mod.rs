@@ -40,8 +40,10 @@
 pub mod conductor;
 pub mod dielectric;
 pub mod diffuse;
-pub mod ggx;
+pub mod fresnel;
+pub mod ior;
 pub mod mask;
+pub mod microfacet;
 pub mod roughconductor;
 pub mod twosided;
 

@@ -1,13 +1,18 @@
-//! Mitsuba's `roughconductor`: the GGX microfacet model of Walter et al. 2007, "Microfacet
-//! models for refraction through rough surfaces", front side only, with Smith's *separable*
-//! shadowing–masking `G = G1(wi)·G1(wo)` (Mitsuba's choice).
+//! Mitsuba's `roughconductor`: the microfacet model of Walter et al. 2007, "Microfacet models
+//! for refraction through rough surfaces", front side only, with Smith's *separable*
+//! shadowing–masking `G = G1(wi)·G1(wo)` (Mitsuba's choice), GGX or Beckmann, and the conductor
+//! Fresnel factor of [`super::conductor`].
 //!
-//! Sampling draws microfacet normals from the distribution of normals *visible* from `wi` (see
-//! [`super::ggx`]); Mitsuba uses an older slope-space routine for the same density, so
-//! expectations agree. The reflected direction's density is `D_wi(m) / (4 |wo·m|)` and the
-//! sample weight simplifies to `F · G1(wo)`. Like Mitsuba, `alpha` is clamped below at `1e-4`.
+//! Sampling draws microfacet normals from the distribution of normals *visible* from `wi`
+//! ([`super::microfacet`]). The reported density is Mitsuba's formula,
+//! `D(m) G1(wi, m) (wi·m) / (cos θi · 4 wo·m)`, so that the weight `eval / pdf = F · G1(wo)` is
+//! Mitsuba's weight. For GGX that is the sampler's exact density; for Beckmann Mitsuba's `G1` is
+//! a rational fit, and the two differ by under 0.35% — a difference Mitsuba itself has, which we
+//! keep so that both renderers estimate the same thing. Like Mitsuba, `alpha` is clamped below
+//! at `1e-4`.
 
-use super::ggx::{Ggx, MIN_ALPHA};
+use super::conductor::{ComplexIor, read_complex_ior};
+use super::microfacet::{Distribution, Microfacet};
 use super::{Bsdf, BsdfSample, NONE, SurfacePoint};
 use crate::error::{Num, Result};
 use crate::limits::shorten;
@@ -21,55 +26,30 @@ use std::sync::Arc;
 #[derive(Debug, Clone)]
 pub struct RoughConductor {
     /// The microfacet distribution.
-    pub ggx: Ggx,
+    pub distribution: Microfacet,
+    /// Complex index of refraction.
+    pub ior: ComplexIor,
     /// Tint (Mitsuba's default 1).
     pub specular_reflectance: Spectrum,
 }
 
 impl RoughConductor {
-    /// A GGX conductor of roughness `alpha` (clamped to at least [`MIN_ALPHA`]) and constant
-    /// tint.
+    /// A GGX mirror (`material="none"`) of roughness `alpha` (clamped to at least 1e-4) and
+    /// constant tint.
     pub fn new(alpha: f32, specular_reflectance: Rgb) -> RoughConductor {
         RoughConductor {
-            // `max` also maps a NaN alpha to the bound.
-            ggx: Ggx {
-                alpha: alpha.max(MIN_ALPHA),
-            },
+            distribution: Microfacet::isotropic(Distribution::Ggx, alpha),
+            ior: ComplexIor::Perfect,
             specular_reflectance: Spectrum::Constant(specular_reflectance),
         }
     }
 }
 
-/// Conductors model only Mitsuba's `material="none"`: complex indices are rejected.
-pub(super) fn reject_complex_ior(p: &mut Params) -> Result<()> {
-    for name in ["eta", "k"] {
-        p.reject(
-            name,
-            "complex indices of refraction are not modelled; only material=\"none\" (a mirror \
-             tinted by specular_reflectance)",
-        )?;
-    }
-    Ok(())
-}
-
-/// A conductor's `material`, which may only be `none` (also Mitsuba 3's default).
-pub(super) fn check_material(p: &Params, material: At<String>) -> Result<()> {
-    match material {
-        Some((name, at)) if name != "none" => Err(p.err(
-            Some(at),
-            format!(
-                "material \"{}\" is not modelled; only \"none\" (a mirror tinted by \
-                 specular_reflectance)",
-                shorten(&name)
-            ),
-        )),
-        _ => Ok(()),
-    }
-}
-
-/// Reads `<bsdf type="roughconductor">`.
-pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
-    reject_complex_ior(p)?;
+/// Reads an isotropic microfacet distribution as Mitsuba's rough BSDFs do: `distribution`
+/// (`beckmann`, Mitsuba's default, or `ggx`), `alpha` (default 0.1, > 0), `sample_visible`
+/// (only `true`, Mitsuba's default). Anisotropic roughness is refused: it needs Mitsuba's
+/// tangent frame (from `dp/du`), which the renderer does not model.
+pub(super) fn read_distribution(p: &mut Params) -> Result<Microfacet> {
     for name in ["alpha_u", "alpha_v"] {
         p.reject(
             name,
@@ -78,50 +58,50 @@ pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
     }
     let distribution = p.string("distribution")?;
     let alpha = p.float("alpha")?;
-    let material = p.string("material")?;
     let sample_visible = p.boolean("sample_visible")?;
-    let tint = p.texture("specular_reflectance")?;
-    p.finish()?;
-    match distribution {
-        None => {
-            return Err(p.err(
-                None,
-                "missing <string name=\"distribution\" value=\"ggx\"/>: Mitsuba's default \
-                 distribution is beckmann, which is not modelled; give ggx explicitly",
-            ));
-        }
-        Some((d, at)) if d != "ggx" => {
-            return Err(p.err(
-                Some(at),
-                format!(
-                    "distribution \"{}\" is not modelled; only \"ggx\" is",
-                    shorten(&d)
-                ),
-            ));
-        }
-        Some(_) => {}
-    }
     if let Some((false, at)) = sample_visible {
         return Err(p.err(
             Some(at),
             "sample_visible = false is not modelled; only true (Mitsuba's default)",
         ));
     }
-    check_material(p, material)?;
+    let kind = match distribution {
+        None => Distribution::Beckmann,
+        Some((d, at)) => Distribution::from_name(&d).ok_or_else(|| {
+            p.err(
+                Some(at),
+                format!("distribution \"{}\": must be beckmann or ggx", shorten(&d)),
+            )
+        })?,
+    };
     let alpha_value = alpha.as_ref().map_or(0.1, |(a, _)| *a);
-    if !(alpha_value > 0.0) {
-        return Err(p.err(
-            alpha.map(|(_, at)| at),
-            format!(
-                "alpha = {}: must be > 0 (use a conductor for a perfect mirror)",
-                Num::from_f32(alpha_value)
-            ),
-        ));
+    check_alpha(p, alpha_value, alpha)?;
+    Ok(Microfacet::isotropic(kind, alpha_value))
+}
+
+/// `alpha` must be a positive roughness.
+fn check_alpha(p: &Params, value: f32, given: At<f32>) -> Result<()> {
+    if value > 0.0 {
+        return Ok(());
     }
+    Err(p.err(
+        given.map(|(_, at)| at),
+        format!(
+            "alpha = {}: must be > 0 (use the smooth plugin for a perfectly smooth surface)",
+            Num::from_f32(value)
+        ),
+    ))
+}
+
+/// Reads `<bsdf type="roughconductor">`.
+pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
+    let ior = read_complex_ior(p)?;
+    let distribution = read_distribution(p)?;
+    let tint = p.texture("specular_reflectance")?;
+    p.finish()?;
     Ok(Arc::new(RoughConductor {
-        ggx: Ggx {
-            alpha: alpha_value.max(MIN_ALPHA),
-        },
+        distribution,
+        ior,
         specular_reflectance: tint.map_or(Spectrum::grey(1.0), |(t, _)| t),
     }))
 }
@@ -139,23 +119,25 @@ impl Bsdf for RoughConductor {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return NONE;
         }
-        let ggx = self.ggx;
+        let md = &self.distribution;
         // Both directions are above the horizon, so wi + wo has z > 0 and the half vector is
         // well defined; it also faces both (wi·m = wo·m > 0).
         let Some(m) = (wi + wo).try_normalize() else {
             return NONE;
         };
-        let d = ggx.d(m);
+        let d = md.d(m);
         if d == 0.0 {
             return NONE;
         }
-        // pdf = D_wi(m) / (4 wo·m) = G1(wi) (wi·m) D / (cos θi · 4 wo·m), with wi·m = wo·m.
-        let pdf = d * ggx.g1_over_cos(wi) * 0.25;
+        // pdf = D G1(wi) (wi·m) / (cos θi · 4 wo·m) = D G1(wi) / (4 cos θi), with wi·m = wo·m.
+        let g1_wi = md.g1(wi, m);
+        let pdf = d * g1_wi / (4.0 * wi.z);
         if !(pdf.is_finite() && pdf > 0.0) {
             return NONE;
         }
         // eval = F D G1(wi) G1(wo) / (4 cos θi) = pdf · F · G1(wo).
-        let value = self.specular_reflectance.eval(at.uv) * (pdf * ggx.g1(wo, m));
+        let f = self.ior.fresnel(wi.dot(m));
+        let value = self.specular_reflectance.eval(at.uv) * f * (pdf * md.g1(wo, m));
         (value, pdf)
     }
 
@@ -163,7 +145,7 @@ impl Bsdf for RoughConductor {
         if wi.z <= 0.0 {
             return None;
         }
-        let m = self.ggx.sample_visible(wi, u)?;
+        let m = self.distribution.sample_visible(wi, u)?;
         let cos_im = wi.dot(m);
         if cos_im <= 0.0 {
             return None;

@@ -1,4 +1,4 @@
-//! Loads the subset of Mitsuba 3's XML scene format that the renderer models into a [`SceneDesc`].
+//! Loads the subset of Mitsuba's XML scene format that the renderer models into a [`SceneDesc`].
 //!
 //! The renderer is a reference for comparisons against Mitsuba, so a scene that loads but means
 //! something slightly different from what Mitsuba would render is worse than one that does not
@@ -6,23 +6,23 @@
 //! the subset below, every misspelt or unused parameter, every parameter given twice and every
 //! value of the wrong kind is an [`Error::Scene`] naming the file, the line, the element and the
 //! offending value. Where Mitsuba's default is something the renderer does not model (a gaussian
-//! reconstruction filter, a Beckmann microfacet distribution), the parameter must be given
-//! explicitly.
+//! reconstruction filter), the scene must say otherwise or the user must override it.
 //!
 //! The subset, with Mitsuba 3's semantics and defaults:
 //!
-//! * `<scene version="3.x.y">` with `<default name value>` and `$name` substitution in attribute
-//!   values; `id` on top-level objects and `<ref id>` to a BSDF declared earlier;
-//! * values `float`, `integer`, `boolean`, `string`, `rgb`, `point`, `vector` and
-//!   `transform` (`translate`, `rotate`, `scale`, `matrix`, `lookat`, each left-multiplied);
-//!   spectrum parameters also take a `float` (grey);
-//! * shapes `rectangle`, `cube`, `sphere`, `disk`, `obj`, each with at most one BSDF and one
-//!   `area` emitter;
-//! * BSDFs `diffuse`, `conductor` and `roughconductor` (`material="none"` only, GGX only),
-//!   `dielectric` and `twosided`;
-//! * emitters `point` and `constant` at the top level;
-//! * one `perspective` sensor with an `hdrfilm` (explicit `box` filter) and an `independent`
-//!   sampler, and an optional `path` integrator;
+//! * `<scene version="3.x.y">` or `"2.x.y"`, and `"0.x.y"` (Mitsuba 0.5/0.6 files such as
+//!   Bitterli's scenes) read as Mitsuba 3 upgrades them: camelCase parameter names become
+//!   snake_case, `lookAt` becomes `lookat`, texture `uoffset`/`uscale`
+//!   become `to_uv`;
+//! * `<default name value>` and `$name` substitution in attribute values; `id` on top-level
+//!   objects and `<ref id>` to a BSDF declared earlier;
+//! * values `float`, `integer`, `boolean`, `string`, `rgb`, `point`, `vector` and `transform`
+//!   (`translate`, `rotate`, `scale`, `matrix`, `lookat`, each left-multiplied); spectrum
+//!   parameters also take a `float` (grey), and texturable ones a nested `<texture>`;
+//! * the plugins of [`table`] (one row each, pointing at the plugin's own file);
+//! * one `perspective` sensor (`sensor.rs`) with an `hdrfilm` (box filter, or any filter under
+//!   [`LoadOptions::box_filter`]) and an `independent` sampler, and an optional `path`
+//!   integrator;
 //! * every world-space coordinate within ±[`MAX_COORDINATE`] (1e18), where the renderer's f32
 //!   arithmetic cannot overflow.
 

@@ -11,35 +11,9 @@ use super::{At, Loader, OBJECT_TAGS, VALUE_TAGS, describe, edit_distance, list};
 use crate::error::{Error, Result};
 use crate::limits::shorten;
 use crate::render::bsdfs::Bsdf;
+use crate::render::bsdfs::ior::{dielectric_ior, dielectric_names};
 use crate::render::scene::Rgb;
 use crate::render::textures::Spectrum;
-
-/// Mitsuba's named indices of refraction (its `lookup_ior` table).
-pub(crate) const NAMED_IORS: &[(&str, f32)] = &[
-    ("vacuum", 1.0),
-    ("helium", 1.00004),
-    ("hydrogen", 1.00013),
-    ("air", 1.000277),
-    ("carbon dioxide", 1.00045),
-    ("water", 1.3330),
-    ("acetone", 1.36),
-    ("ethanol", 1.361),
-    ("carbon tetrachloride", 1.461),
-    ("glycerol", 1.4729),
-    ("benzene", 1.501),
-    ("silicone oil", 1.52045),
-    ("bromine", 1.661),
-    ("water ice", 1.31),
-    ("fused quartz", 1.458),
-    ("pyrex", 1.470),
-    ("acrylic glass", 1.49),
-    ("polypropylene", 1.49),
-    ("bk7", 1.5046),
-    ("sodium chloride", 1.544),
-    ("amber", 1.55),
-    ("pet", 1.5750),
-    ("diamond", 2.419),
-];
 
 /// Mitsuba's `hdrfilm` pixel formats; accepted and ignored (they do not change pixel values).
 /// One value element of a plugin, and whether the plugin asked for it.
@@ -360,15 +334,13 @@ impl<'l, 'a, 'i> Params<'l, 'a, 'i> {
         let value = if node.tag_name().name() == "float" {
             self.ld.number(node, "value", &text)?
         } else {
-            let key = text.trim().to_ascii_lowercase();
-            let Some(&(_, ior)) = NAMED_IORS.iter().find(|(n, _)| *n == key) else {
-                let names: Vec<&str> = NAMED_IORS.iter().map(|(n, _)| *n).collect();
+            let Some(ior) = dielectric_ior(text.trim()) else {
                 return Err(self.ld.err(
                     node,
                     format!(
                         "unknown index of refraction \"{}\"; known names: {}",
                         shorten(&text),
-                        list(&names)
+                        dielectric_names()
                     ),
                 ));
             };
