@@ -44,7 +44,11 @@ pub mod fresnel;
 pub mod ior;
 pub mod mask;
 pub mod microfacet;
+pub mod plastic;
 pub mod roughconductor;
+pub mod roughdielectric;
+pub mod roughplastic;
+pub mod thindielectric;
 pub mod twosided;
 
 use super::scene::Rgb;

@@ -27,7 +27,11 @@ pub const BSDFS: &[(&str, BsdfLoader)] = &[
     ("dielectric", bsdfs::dielectric::load),
     ("diffuse", bsdfs::diffuse::load),
     ("mask", bsdfs::mask::load),
+    ("plastic", bsdfs::plastic::load),
     ("roughconductor", bsdfs::roughconductor::load),
+    ("roughdielectric", bsdfs::roughdielectric::load),
+    ("roughplastic", bsdfs::roughplastic::load),
+    ("thindielectric", bsdfs::thindielectric::load),
     ("twosided", bsdfs::twosided::load),
 ];
 

@@ -1,0 +1,105 @@
+//! Mitsuba's `thindielectric`: a pane of glass so thin that it has no thickness — two parallel
+//! smooth interfaces with every internal bounce summed in closed form, as Mitsuba 3.9.1 does.
+//!
+//! With `F` the Fresnel reflectance of one interface at `|cos θi|` (always evaluated from the
+//! outside, relative index `int_ior / ext_ior`), the slab reflects the geometric series
+//! `R = F + (1−F)² F (1 + F² + F⁴ + …) = F + (1−F)² F / (1 − F²) = 2F / (1 + F)` (Mitsuba's
+//! `r *= 2 / (1 + r)`) and transmits `1 − R`, neglecting absorption. Transmission is straight
+//! through (`wo = −wi`: the two refractions cancel), so no medium changes and the sample's `eta`
+//! is 1 for both lobes. Mitsuba picks reflection with probability `R`, so the weights are just
+//! the tints.
+//!
+//! Mitsuba classes the transmission as a *null* interaction (a delta lobe the path integrator
+//! treats like any other bounce); its shadow rays, like ours, see the pane as opaque.
+
+use super::dielectric::{DEFAULT_EXT_IOR, DEFAULT_INT_IOR};
+use super::fresnel::fresnel_dielectric;
+use super::{Bsdf, BsdfSample, NONE, SurfacePoint, reflect_z};
+use crate::error::Result;
+use crate::render::mitsuba::Params;
+use crate::render::scene::Rgb;
+use crate::render::textures::Spectrum;
+use glam::{Vec2, Vec3};
+use std::sync::Arc;
+
+/// A thin dielectric slab.
+#[derive(Debug, Clone)]
+pub struct ThinDielectric {
+    /// `int_ior / ext_ior`.
+    pub eta: f32,
+    /// Reflection tint (Mitsuba's default 1).
+    pub specular_reflectance: Spectrum,
+    /// Transmission tint (Mitsuba's default 1).
+    pub specular_transmittance: Spectrum,
+}
+
+impl ThinDielectric {
+    /// An untinted pane of relative index `int_ior / ext_ior`.
+    pub fn new(int_ior: f32, ext_ior: f32) -> ThinDielectric {
+        ThinDielectric {
+            eta: int_ior / ext_ior,
+            specular_reflectance: Spectrum::grey(1.0),
+            specular_transmittance: Spectrum::grey(1.0),
+        }
+    }
+
+    /// The slab's total reflectance `R = 2F / (1 + F)` for `wi` on either side.
+    pub fn reflectance(&self, wi: Vec3) -> f32 {
+        let f = fresnel_dielectric(wi.z.abs(), self.eta).0;
+        f * (2.0 / (1.0 + f))
+    }
+}
+
+/// Reads `<bsdf type="thindielectric">`.
+pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
+    let int_ior = p.ior("int_ior")?;
+    let ext_ior = p.ior("ext_ior")?;
+    let reflect = p.texture("specular_reflectance")?;
+    let transmit = p.texture("specular_transmittance")?;
+    p.finish()?;
+    let int_ior = int_ior.map_or(DEFAULT_INT_IOR, |(v, _)| v);
+    let ext_ior = ext_ior.map_or(DEFAULT_EXT_IOR, |(v, _)| v);
+    Ok(Arc::new(ThinDielectric {
+        eta: int_ior / ext_ior,
+        specular_reflectance: reflect.map_or(Spectrum::grey(1.0), |(t, _)| t),
+        specular_transmittance: transmit.map_or(Spectrum::grey(1.0), |(t, _)| t),
+    }))
+}
+
+impl Bsdf for ThinDielectric {
+    fn has_smooth_lobe(&self) -> bool {
+        false
+    }
+
+    fn uses_uv(&self) -> bool {
+        self.specular_reflectance.is_textured() || self.specular_transmittance.is_textured()
+    }
+
+    fn transmits(&self) -> bool {
+        true
+    }
+
+    fn eval_pdf(&self, _at: &SurfacePoint, _wi: Vec3, _wo: Vec3) -> (Rgb, f32) {
+        NONE
+    }
+
+    fn sample(&self, at: &SurfacePoint, wi: Vec3, u_lobe: f32, _u: Vec2) -> Option<BsdfSample> {
+        let r = self.reflectance(wi);
+        if !(r >= 0.0) {
+            return None;
+        }
+        // Reflection chosen with probability R (Mitsuba's `sample1 <= r`): weight R·tint / R.
+        let (wo, weight) = if u_lobe <= r {
+            (reflect_z(wi), self.specular_reflectance.eval(at.uv))
+        } else {
+            (-wi, self.specular_transmittance.eval(at.uv))
+        };
+        Some(BsdfSample {
+            wo,
+            weight,
+            pdf: f32::INFINITY,
+            delta: true,
+            eta: 1.0,
+        })
+    }
+}
