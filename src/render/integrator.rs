@@ -98,7 +98,13 @@ pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
         let frame = Frame::new(hit.ns);
         let wi = frame.to_local(-ray.d);
         let bsdf = &*world.bsdfs[hit.shape as usize];
-        let at = SurfacePoint { uv: hit.uv };
+        let at = SurfacePoint {
+            uv: hit.uv,
+            frame,
+            ng: hit.ng,
+            dp_du: hit.dp_du,
+            dp_dv: hit.dp_dv,
+        };
 
         // Next-event estimation.
         let u_choice = rng.next_1d();

@@ -37,6 +37,7 @@
 //! Write one file with a struct implementing [`Bsdf`] and a `load` function reading its
 //! parameters, and add one row to the loader's table (`super::mitsuba::table`).
 
+pub mod bumpmap;
 pub mod conductor;
 pub mod dielectric;
 pub mod diffuse;
@@ -51,15 +52,43 @@ pub mod roughplastic;
 pub mod thindielectric;
 pub mod twosided;
 
+use super::sampling::Frame;
 use super::scene::Rgb;
 use glam::{Vec2, Vec3};
 use std::fmt::Debug;
 
 /// What a BSDF may look up about the surface point it scatters at, besides directions.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+///
+/// Everything here is cheap to fill at every hit (a few dozen flops): BSDFs that do not read a
+/// field pay only for copying it.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SurfacePoint {
     /// Texture coordinates (Mitsuba's `uv`; `(0, 0)` on shapes without them).
     pub uv: Vec2,
+    /// The world-space shading frame the directions are expressed in (`frame.to_world` of a
+    /// local direction is the world direction); its `n` is the shading normal.
+    pub frame: Frame,
+    /// Unit geometric normal of the shape's front, in world space (Mitsuba's `si.n`).
+    pub ng: Vec3,
+    /// World-space `∂p/∂u` (Mitsuba's `si.dp_du`): on a triangle with texture coordinates, from
+    /// its uv parametrisation; elsewhere the first tangent of `ng`'s coordinate system, as
+    /// Mitsuba's meshes without uvs have it.
+    pub dp_du: Vec3,
+    /// World-space `∂p/∂v` (Mitsuba's `si.dp_dv`), likewise.
+    pub dp_dv: Vec3,
+}
+
+impl Default for SurfacePoint {
+    /// A point at the origin of texture space whose local frame is the world's (`+z` up).
+    fn default() -> Self {
+        SurfacePoint {
+            uv: Vec2::ZERO,
+            frame: Frame::new(Vec3::Z),
+            ng: Vec3::Z,
+            dp_du: Vec3::X,
+            dp_dv: Vec3::Y,
+        }
+    }
 }
 
 /// The outcome of [`Bsdf::sample`].

@@ -23,6 +23,7 @@ pub type ShapeLoader = fn(&mut Params) -> Result<GeometryDesc>;
 
 /// `<bsdf type="...">`.
 pub const BSDFS: &[(&str, BsdfLoader)] = &[
+    ("bumpmap", bsdfs::bumpmap::load),
     ("conductor", bsdfs::conductor::load),
     ("dielectric", bsdfs::dielectric::load),
     ("diffuse", bsdfs::diffuse::load),

@@ -63,6 +63,11 @@ pub struct Hit {
     pub shape: u32,
     /// Texture coordinates (interpolated on meshes that have them, else `(0, 0)`).
     pub uv: Vec2,
+    /// World-space `∂p/∂u` as Mitsuba defines it: from the uv parametrisation on triangles
+    /// with texture coordinates ([`uv_tangents`]), else a tangent of `ng`.
+    pub dp_du: Vec3,
+    /// World-space `∂p/∂v` (likewise).
+    pub dp_dv: Vec3,
 }
 
 /// Per-ray data shared by every primitive test of one traversal: the origin, the direction
@@ -338,10 +343,16 @@ impl Primitive {
                     .or_else(|| triangle_normal(p))
                     .unwrap_or(Vec3::Z);
                 let normals = attrs.as_ref().and_then(|a| a.n.as_ref());
-                let uv = match attrs.as_ref().and_then(|a| a.uv.as_ref()) {
+                let uvs = attrs.as_ref().and_then(|a| a.uv.as_ref());
+                let uv = match uvs {
                     Some(uv) => uv[0] * b0 + uv[1] * b1 + uv[2] * b2,
                     None => Vec2::ZERO,
                 };
+                // Derived here, per hit, rather than stored per triangle: two more vectors for
+                // each of a scene's 10^5 triangles would cost more memory than they save time.
+                let (dp_du, dp_dv) = uvs
+                    .and_then(|uv| uv_tangents(p, uv))
+                    .unwrap_or_else(|| tangents_of(ng));
                 let ns = match normals {
                     Some(n) => match (n[0] * b0 + n[1] * b1 + n[2] * b2).try_normalize() {
                         Some(s) if s.dot(ng) < 0.0 => -s,
@@ -357,6 +368,8 @@ impl Primitive {
                     ns,
                     shape: *shape,
                     uv,
+                    dp_du,
+                    dp_dv,
                 }
             }
             &Primitive::Sphere {
@@ -373,6 +386,7 @@ impl Primitive {
                 };
                 // Project onto the surface: the normal is exact and the point on the sphere.
                 let ng = q.try_normalize().unwrap_or(Vec3::Z);
+                let (dp_du, dp_dv) = tangents_of(ng);
                 Hit {
                     t,
                     p: center + ng * radius,
@@ -380,10 +394,13 @@ impl Primitive {
                     ns: ng,
                     shape,
                     uv: Vec2::ZERO,
+                    dp_du,
+                    dp_dv,
                 }
             }
             Primitive::Disk { disk, shape } => {
                 let p = disk.to_world.transform_point3(Vec3::new(h.a, h.b, 0.0));
+                let (dp_du, dp_dv) = tangents_of(disk.normal);
                 Hit {
                     t: h.t,
                     p,
@@ -391,10 +408,42 @@ impl Primitive {
                     ns: disk.normal,
                     shape: *shape,
                     uv: Vec2::ZERO,
+                    dp_du,
+                    dp_dv,
                 }
             }
         }
     }
+}
+
+/// Mitsuba's `∂p/∂u` and `∂p/∂v` of the triangle `p` with texture coordinates `uv`: the
+/// linear map from uv to position that sends the uv edges to the position edges, i.e. with
+/// `Δuv₀ = uv₁ − uv₀`, `Δuv₁ = uv₂ − uv₀`, `Δp₀ = p₁ − p₀`, `Δp₁ = p₂ − p₀` and
+/// `det = Δu₀Δv₁ − Δv₀Δu₁`:
+/// `∂p/∂u = (Δv₁·Δp₀ − Δv₀·Δp₁) / det`, `∂p/∂v = (Δu₀·Δp₁ − Δu₁·Δp₀) / det`.
+/// Swapping two vertices negates both numerators and `det`, so the mirrored winding of
+/// [`mesh::transform_mesh`] leaves them unchanged. `None` when the uvs are collinear (Mitsuba
+/// then keeps the tangents of the normal, as [`tangents_of`]) or the result is not finite.
+pub fn uv_tangents(p: &[Vec3; 3], uv: &[Vec2; 3]) -> Option<(Vec3, Vec3)> {
+    let (duv0, duv1) = (uv[1] - uv[0], uv[2] - uv[0]);
+    let (dp0, dp1) = (p[1] - p[0], p[2] - p[0]);
+    let det = duv0.x * duv1.y - duv0.y * duv1.x;
+    if det == 0.0 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let dp_du = (dp0 * duv1.y - dp1 * duv0.y) * inv;
+    let dp_dv = (dp1 * duv0.x - dp0 * duv1.x) * inv;
+    (dp_du.is_finite() && dp_dv.is_finite()).then_some((dp_du, dp_dv))
+}
+
+/// The two tangents of the unit normal `n`'s coordinate system (Mitsuba's
+/// `coordinate_system`, the same construction as [`Frame::new`]): its `dp_du`, `dp_dv` where a
+/// shape has no texture coordinates.
+#[inline]
+fn tangents_of(n: Vec3) -> (Vec3, Vec3) {
+    let f = Frame::new(n);
+    (f.s, f.t)
 }
 
 /// How much larger than a triangle hit's own values (its `t`, its coordinates) the vertices'

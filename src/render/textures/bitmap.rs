@@ -21,6 +21,13 @@
 //!   interpolated RGB (the value itself for a grey image). This is what Mitsuba's `mask` BSDF
 //!   uses as opacity (clamped to [0, 1]): the alpha channel of an RGBA image is dropped on
 //!   load and plays no part (see [`crate::image::read`]).
+//! * **[`Bitmap::eval_1_grad`]** is Mitsuba's: with bilinear filtering, the derivative of the
+//!   bilinear blend of the four texels' `eval_1` values (luminance for colour) with respect to
+//!   the texel position `(x, y) = p·size − ½`, taken back through `to_uv` by its transposed
+//!   linear part and **then** multiplied by `(width, height)`. That last order is Mitsuba's: it
+//!   is the exact chain rule only when `to_uv` has no rotation or shear or the image is square
+//!   (otherwise each component gets the other axis's resolution factor on its cross term); we
+//!   keep it, to bump like Mitsuba. Nearest filtering has gradient zero.
 //! * **[`Bitmap::mean`]** is the average over all pixels of that same luminance (or value),
 //!   accumulated in `f32` in storage order as Mitsuba does.
 //! * **Arithmetic.** The uv transform, the bilinear shift and blend and the luminance use fused
@@ -165,6 +172,41 @@ impl Bitmap {
     /// Mitsuba's `mean()`: the average over all texels of the luminance (or grey value).
     pub fn mean(&self) -> f32 {
         self.mean
+    }
+
+    /// Mitsuba's `eval_1_grad`: `∂ eval_1 / ∂(u, v)` (see the module documentation for the
+    /// order in which `to_uv` and the resolution enter); zero with nearest filtering.
+    pub fn eval_1_grad(&self, uv: Vec2) -> Vec2 {
+        if self.filter == Filter::Nearest {
+            return Vec2::ZERO;
+        }
+        let m = &self.to_uv;
+        let px = m[1].mul_add(uv.y, m[0].mul_add(uv.x, m[2]));
+        let py = m[4].mul_add(uv.y, m[3].mul_add(uv.x, m[5]));
+        let (w, h) = (self.width as f32, self.height as f32);
+        let (sx, sy) = (px.mul_add(w, -0.5), py.mul_add(h, -0.5));
+        let (ix, iy) = (floor_index(sx), floor_index(sy));
+        let (fx, fy) = (sx - ix as f32, sy - iy as f32);
+        let x0 = self.wrap_index(ix, self.width);
+        let x1 = self.wrap_index(ix + 1, self.width);
+        let y0 = self.wrap_index(iy, self.height);
+        let y1 = self.wrap_index(iy + 1, self.height);
+        let value = |x, y| {
+            let t = self.texel(x, y);
+            if self.channels == 1 {
+                t[0]
+            } else {
+                luminance(t)
+            }
+        };
+        let (f00, f10, f01, f11) = (value(x0, y0), value(x1, y0), value(x0, y1), value(x1, y1));
+        // Partial derivatives with respect to the texel position.
+        let dx = (1.0 - fy).mul_add(f10 - f00, fy * (f11 - f01));
+        let dy = (1.0 - fx).mul_add(f01 - f00, fx * (f11 - f10));
+        // Back through the transposed linear part of `to_uv`, then Mitsuba's resolution factor.
+        let du = m[0] * dx + m[3] * dy;
+        let dv = m[1] * dx + m[4] * dy;
+        Vec2::new(w * du, h * dv)
     }
 
     /// Interpolated channels at `uv`; only the first `channels` entries are meaningful.
@@ -462,5 +504,13 @@ impl Texture for Bitmap {
 
     fn mean(&self) -> f32 {
         Bitmap::mean(self)
+    }
+
+    fn eval_1_grad(&self, uv: Vec2) -> Vec2 {
+        Bitmap::eval_1_grad(self, uv)
+    }
+
+    fn has_eval_1_grad(&self) -> bool {
+        true
     }
 }

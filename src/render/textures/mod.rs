@@ -20,6 +20,18 @@ pub trait Texture: Debug + Send + Sync {
     fn eval_1(&self, uv: Vec2) -> f32;
     /// The texture's mean (Mitsuba's `mean()`; `plastic` weighs its lobes with it).
     fn mean(&self) -> f32;
+    /// The gradient of [`Texture::eval_1`] with respect to `uv` (Mitsuba's `eval_1_grad`, which
+    /// `bumpmap` reads). The default, zero, is a constant's gradient; a texture that computes
+    /// one also says so in [`Texture::has_eval_1_grad`].
+    fn eval_1_grad(&self, _uv: Vec2) -> Vec2 {
+        Vec2::ZERO
+    }
+    /// Whether Mitsuba implements `eval_1_grad` for this plugin (its `bitmap` does; its
+    /// `checkerboard` throws "not implemented"), so that `bumpmap` can refuse the others when
+    /// the scene is read rather than render something Mitsuba cannot.
+    fn has_eval_1_grad(&self) -> bool {
+        false
+    }
 }
 
 /// A BSDF parameter that Mitsuba lets be a constant or a texture.
