@@ -23,7 +23,7 @@ use statrs::distribution::{ChiSquared, ContinuousCDF};
 use std::f64::consts::PI;
 use std::path::Path;
 
-const AT: SurfacePoint = SurfacePoint { uv: Vec2::ZERO };
+static AT: std::sync::LazyLock<SurfacePoint> = std::sync::LazyLock::new(SurfacePoint::default);
 
 /// The fixture's tints (see `make_fixture.py`).
 const REFLECT_TINT: Rgb = Rgb::new(0.9, 0.5, 0.2);

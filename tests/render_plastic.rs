@@ -21,7 +21,7 @@ use std::f64::consts::PI;
 use std::path::Path;
 use std::sync::Arc;
 
-const AT: SurfacePoint = SurfacePoint { uv: Vec2::ZERO };
+static AT: std::sync::LazyLock<SurfacePoint> = std::sync::LazyLock::new(SurfacePoint::default);
 
 fn rng(seed: u64) -> Xoshiro256PlusPlus {
     Xoshiro256PlusPlus::seed_from_u64(seed)
@@ -709,6 +709,7 @@ fn loader_reads_both_plugins() {
     assert!(b[3].uses_uv());
     let at = |u: f32, v: f32| SurfacePoint {
         uv: Vec2::new(u, v),
+        ..SurfacePoint::default()
     };
     assert_ne!(
         b[3].eval(&at(0.25, 0.25), wi, wo),
