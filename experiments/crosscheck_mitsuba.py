@@ -15,7 +15,9 @@ gets a Welch t-test (unequal variances) of "same expectation". The family of all
 a scene is held at alpha = 0.01 by a Sidak correction, alpha_test = 1 - (1 - alpha)^(1/#tests).
 Without bias the expected number of rejecting tests in a scene is about alpha (that is, almost
 always zero), so a single rejecting test fails the scene, and a single failing scene fails the
-run. What passing does not prove: a bias smaller than the block mean's noise at K seeds goes
+run. A block whose two means differ by under 0.05% of its mean (PRACTICAL_RTOL) agrees whatever
+its t statistic: on nearly noise-free regions such as a directly seen sky, float32 rounding
+differences between the renderers would otherwise reject. What passing does not prove: a bias smaller than the block mean's noise at K seeds goes
 unseen (the JSON report gives the smallest p-value per scene and the relative difference of the
 image means with its standard error, which bounds what the test could see); and on heavy-tailed
 scenes the t statistic is only approximately t-distributed at small K.
@@ -102,6 +104,13 @@ DEFAULT_BLOCK = 8
 # this relative tolerance, which allows for float32 rounding, and fails otherwise.
 DEGENERATE_RTOL = 1e-4
 DEGENERATE_ATOL = 1e-7
+# A block whose two means differ by less than this fraction of the block mean agrees, whatever
+# its t statistic: the two renderers' float32 arithmetic differs by about this much on smooth,
+# nearly noise-free regions (a sky seen directly: both evaluate the same map through float32
+# camera rays, and the seeds' spread there is only the pixel jitter), where the t-test would
+# otherwise turn a 0.01% rounding difference into a rejection. It is far below any bias worth
+# finding (the smallest we chase is about 0.1%).
+PRACTICAL_RTOL = 5e-4
 
 EXIT_OK, EXIT_BIAS, EXIT_ERROR, EXIT_SETUP = 0, 1, 2, 3
 
@@ -473,6 +482,8 @@ def welch_blocks(ref, ours, block: int) -> dict:
     agree = np.abs(mean_a - mean_b) <= DEGENERATE_RTOL * scale + DEGENERATE_ATOL
     p = np.where(degenerate, np.where(agree, 1.0, 0.0), p)
     p = np.where(np.isnan(p), 1.0, p)
+    negligible = np.abs(mean_a - mean_b) <= PRACTICAL_RTOL * scale + DEGENERATE_ATOL
+    p = np.where(negligible, 1.0, p)
     reject = p < level
     worst = int(np.argmin(p))
     return {
