@@ -329,6 +329,84 @@ fn pad_to_two(image: TextureData) -> TextureData {
     }
 }
 
+/// Reads `<texture type="bitmap">`: `filename` (PNG, JPEG, OpenEXR or Radiance HDR, relative to
+/// the scene's folder), `raw`, `filter_type` (`bilinear`, `nearest`), `wrap_mode` (`repeat`,
+/// `mirror`, `clamp`), `to_uv`.
+pub fn load(p: &mut Params) -> Result<Arc<dyn Texture>> {
+    let filename = p.string("filename")?;
+    let raw = p.boolean("raw")?;
+    let filter = p.string("filter_type")?;
+    let wrap = p.string("wrap_mode")?;
+    let to_uv = read_to_uv(p)?;
+    p.finish()?;
+    let Some((filename, at)) = filename else {
+        return Err(p.err(
+            None,
+            "missing required parameter <string name=\"filename\">",
+        ));
+    };
+    let filter = match filter {
+        None => Filter::Bilinear,
+        Some((f, at)) => match f.as_str() {
+            "bilinear" => Filter::Bilinear,
+            "nearest" => Filter::Nearest,
+            _ => {
+                return Err(p.err(
+                    Some(at),
+                    format!(
+                        "filter_type \"{}\": must be bilinear or nearest",
+                        crate::limits::shorten(&f)
+                    ),
+                ));
+            }
+        },
+    };
+    let wrap = match wrap {
+        None => Wrap::Repeat,
+        Some((w, at)) => match w.as_str() {
+            "repeat" => Wrap::Repeat,
+            "mirror" => Wrap::Mirror,
+            "clamp" => Wrap::Clamp,
+            _ => {
+                return Err(p.err(
+                    Some(at),
+                    format!(
+                        "wrap_mode \"{}\": must be repeat, mirror or clamp",
+                        crate::limits::shorten(&w)
+                    ),
+                ));
+            }
+        },
+    };
+    let path = p.loader().base_dir().join(&filename);
+    let raw = raw.is_some_and(|(r, _)| r);
+    let bitmap = Bitmap::load(&path, raw, filter, wrap, to_uv)
+        .map_err(|e| p.err(Some(at), e.to_string()))?;
+    Ok(Arc::new(bitmap))
+}
+
+impl Texture for Bitmap {
+    fn eval(&self, uv: Vec2) -> Vec3 {
+        Bitmap::eval(self, uv)
+    }
+
+    fn eval_1(&self, uv: Vec2) -> f32 {
+        Bitmap::eval_1(self, uv)
+    }
+
+    fn mean(&self) -> f32 {
+        Bitmap::mean(self)
+    }
+
+    fn eval_1_grad(&self, uv: Vec2) -> Vec2 {
+        Bitmap::eval_1_grad(self, uv)
+    }
+
+    fn has_eval_1_grad(&self) -> bool {
+        true
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -434,83 +512,5 @@ mod tests {
         for u in [f32::NAN, f32::INFINITY, -1e30] {
             let _ = b.eval(Vec2::new(u, 0.5));
         }
-    }
-}
-
-/// Reads `<texture type="bitmap">`: `filename` (PNG, JPEG, OpenEXR or Radiance HDR, relative to
-/// the scene's folder), `raw`, `filter_type` (`bilinear`, `nearest`), `wrap_mode` (`repeat`,
-/// `mirror`, `clamp`), `to_uv`.
-pub fn load(p: &mut Params) -> Result<Arc<dyn Texture>> {
-    let filename = p.string("filename")?;
-    let raw = p.boolean("raw")?;
-    let filter = p.string("filter_type")?;
-    let wrap = p.string("wrap_mode")?;
-    let to_uv = read_to_uv(p)?;
-    p.finish()?;
-    let Some((filename, at)) = filename else {
-        return Err(p.err(
-            None,
-            "missing required parameter <string name=\"filename\">",
-        ));
-    };
-    let filter = match filter {
-        None => Filter::Bilinear,
-        Some((f, at)) => match f.as_str() {
-            "bilinear" => Filter::Bilinear,
-            "nearest" => Filter::Nearest,
-            _ => {
-                return Err(p.err(
-                    Some(at),
-                    format!(
-                        "filter_type \"{}\": must be bilinear or nearest",
-                        crate::limits::shorten(&f)
-                    ),
-                ));
-            }
-        },
-    };
-    let wrap = match wrap {
-        None => Wrap::Repeat,
-        Some((w, at)) => match w.as_str() {
-            "repeat" => Wrap::Repeat,
-            "mirror" => Wrap::Mirror,
-            "clamp" => Wrap::Clamp,
-            _ => {
-                return Err(p.err(
-                    Some(at),
-                    format!(
-                        "wrap_mode \"{}\": must be repeat, mirror or clamp",
-                        crate::limits::shorten(&w)
-                    ),
-                ));
-            }
-        },
-    };
-    let path = p.loader().base_dir().join(&filename);
-    let raw = raw.is_some_and(|(r, _)| r);
-    let bitmap = Bitmap::load(&path, raw, filter, wrap, to_uv)
-        .map_err(|e| p.err(Some(at), e.to_string()))?;
-    Ok(Arc::new(bitmap))
-}
-
-impl Texture for Bitmap {
-    fn eval(&self, uv: Vec2) -> Vec3 {
-        Bitmap::eval(self, uv)
-    }
-
-    fn eval_1(&self, uv: Vec2) -> f32 {
-        Bitmap::eval_1(self, uv)
-    }
-
-    fn mean(&self) -> f32 {
-        Bitmap::mean(self)
-    }
-
-    fn eval_1_grad(&self, uv: Vec2) -> Vec2 {
-        Bitmap::eval_1_grad(self, uv)
-    }
-
-    fn has_eval_1_grad(&self) -> bool {
-        true
     }
 }

@@ -96,26 +96,6 @@ fn channel_mean(c: Vec3) -> f32 {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn defaults_follow_mitsuba_squares() {
-        let c = Checkerboard::new(DEFAULT_COLOR0, DEFAULT_COLOR1, Mat3::IDENTITY);
-        assert_eq!(c.eval(Vec2::new(0.25, 0.25)), DEFAULT_COLOR0);
-        assert_eq!(c.eval(Vec2::new(0.75, 0.25)), DEFAULT_COLOR1);
-        assert_eq!(c.eval(Vec2::new(0.75, 0.75)), DEFAULT_COLOR0);
-        // Exactly ½ is "low".
-        assert_eq!(c.eval(Vec2::new(0.5, 0.25)), DEFAULT_COLOR0);
-        assert_eq!(c.eval(Vec2::new(-0.25, 0.25)), DEFAULT_COLOR1);
-        // eval_1 swaps the squares.
-        assert_eq!(c.eval_1(Vec2::new(0.25, 0.25)), 0.2);
-        assert_eq!(c.eval_1(Vec2::new(0.75, 0.25)), 0.4);
-        assert!((c.mean() - 0.3).abs() < 1e-7);
-    }
-}
-
 /// Reads `<texture type="checkerboard">`: constant `color0`, `color1` (Mitsuba's defaults 0.4
 /// and 0.2), `to_uv`.
 pub fn load(p: &mut Params) -> Result<Arc<dyn Texture>> {
@@ -141,5 +121,25 @@ impl Texture for Checkerboard {
 
     fn mean(&self) -> f32 {
         Checkerboard::mean(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_follow_mitsuba_squares() {
+        let c = Checkerboard::new(DEFAULT_COLOR0, DEFAULT_COLOR1, Mat3::IDENTITY);
+        assert_eq!(c.eval(Vec2::new(0.25, 0.25)), DEFAULT_COLOR0);
+        assert_eq!(c.eval(Vec2::new(0.75, 0.25)), DEFAULT_COLOR1);
+        assert_eq!(c.eval(Vec2::new(0.75, 0.75)), DEFAULT_COLOR0);
+        // Exactly ½ is "low".
+        assert_eq!(c.eval(Vec2::new(0.5, 0.25)), DEFAULT_COLOR0);
+        assert_eq!(c.eval(Vec2::new(-0.25, 0.25)), DEFAULT_COLOR1);
+        // eval_1 swaps the squares.
+        assert_eq!(c.eval_1(Vec2::new(0.25, 0.25)), 0.2);
+        assert_eq!(c.eval_1(Vec2::new(0.75, 0.25)), 0.4);
+        assert!((c.mean() - 0.3).abs() < 1e-7);
     }
 }
