@@ -90,7 +90,8 @@ pub struct CameraDesc {
 pub struct ShapeDesc {
     /// Geometry in world space (transforms already applied where the shape allows).
     pub geometry: GeometryDesc,
-    /// Its BSDF (Mitsuba's default is a diffuse BSDF of reflectance 0.5).
+    /// Its BSDF (Mitsuba's default is a diffuse BSDF of reflectance 0.5, or 0 on a shape with
+    /// an area emitter).
     pub bsdf: Arc<dyn Bsdf>,
     /// Radiance of its `area` emitter, emitted from the front side only.
     pub emission: Option<Rgb>,

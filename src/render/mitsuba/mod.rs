@@ -1012,6 +1012,9 @@ impl<'a, 'i> Loader<'a, 'i> {
         self.check_reach(node, &geometry)?;
 
         let bsdf: Arc<dyn Bsdf> = match bsdfs.as_slice() {
+            // Mitsuba's default BSDF is diffuse of reflectance 0.5, but black on a shape with an
+            // emitter (its `Shape` constructor): a light without a BSDF reflects nothing.
+            [] if !emitters.is_empty() => Arc::new(Diffuse::new(Rgb::ZERO)),
             [] => Arc::new(Diffuse::new(Rgb::splat(0.5))),
             [bsdf] => {
                 let loaded = self.nested_bsdf(*bsdf)?;
