@@ -25,7 +25,7 @@ mod pareto;
 mod point;
 mod presets;
 mod spec;
-mod special;
+pub(crate) mod special;
 
 pub use lognormal::LogNormal;
 pub use mixture::Mixture;

@@ -114,14 +114,11 @@ pub(crate) fn ln_norm_cdf(x: f64) -> f64 {
 /// Number of Gauss-Legendre nodes per panel.
 const GL_NODES: usize = 10;
 
-/// Nodes and weights of the `GL_NODES`-point Gauss-Legendre rule on [-1, 1], found once by
-/// Newton's method on the Legendre polynomial (no tables to transcribe).
-fn gauss_legendre() -> &'static [(f64, f64); GL_NODES] {
-    static RULE: OnceLock<[(f64, f64); GL_NODES]> = OnceLock::new();
-    RULE.get_or_init(|| {
-        let n = GL_NODES;
-        let mut rule = [(0.0, 0.0); GL_NODES];
-        for (i, slot) in rule.iter_mut().enumerate() {
+/// Nodes and weights of the `n`-point Gauss-Legendre rule on [-1, 1], found by Newton's method
+/// on the Legendre polynomial from Tricomi's initial guesses (no tables to transcribe).
+pub(crate) fn gauss_legendre_rule(n: usize) -> Vec<(f64, f64)> {
+    (0..n)
+        .map(|i| {
             let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
             let mut dp = 1.0;
             for _ in 0..100 {
@@ -140,10 +137,15 @@ fn gauss_legendre() -> &'static [(f64, f64); GL_NODES] {
                     break;
                 }
             }
-            *slot = (x, 2.0 / ((1.0 - x * x) * dp * dp));
-        }
-        rule
-    })
+            (x, 2.0 / ((1.0 - x * x) * dp * dp))
+        })
+        .collect()
+}
+
+/// The `GL_NODES`-point rule, found once.
+fn gauss_legendre() -> &'static [(f64, f64)] {
+    static RULE: OnceLock<Vec<(f64, f64)>> = OnceLock::new();
+    RULE.get_or_init(|| gauss_legendre_rule(GL_NODES))
 }
 
 /// Composite Gauss-Legendre integral of `f` over [a, b] with `panels` equal panels.

@@ -39,8 +39,10 @@ impl Dielectric {
     }
 }
 
-/// Reads `<bsdf type="dielectric">`.
-pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
+/// Reads what a smooth interface takes (`dielectric`, `thindielectric`): `int_ior`, `ext_ior`
+/// (numbers or Mitsuba's names; defaults bk7 and air), `specular_reflectance`,
+/// `specular_transmittance` (default 1).
+pub(super) fn read_smooth(p: &mut Params) -> Result<Dielectric> {
     let int_ior = p.ior("int_ior")?;
     let ext_ior = p.ior("ext_ior")?;
     let reflect = p.texture("specular_reflectance")?;
@@ -48,11 +50,16 @@ pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
     p.finish()?;
     let int_ior = int_ior.map_or(DEFAULT_INT_IOR, |(v, _)| v);
     let ext_ior = ext_ior.map_or(DEFAULT_EXT_IOR, |(v, _)| v);
-    Ok(Arc::new(Dielectric {
+    Ok(Dielectric {
         eta: int_ior / ext_ior,
         specular_reflectance: reflect.map_or(Spectrum::grey(1.0), |(t, _)| t),
         specular_transmittance: transmit.map_or(Spectrum::grey(1.0), |(t, _)| t),
-    }))
+    })
+}
+
+/// Reads `<bsdf type="dielectric">`.
+pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
+    Ok(Arc::new(read_smooth(p)?))
 }
 
 impl Bsdf for Dielectric {

@@ -70,6 +70,7 @@
 //! `sample_all` / `pdf_all` sample `D(m) cos θ_m` (Mitsuba's `sample_visible = false`), with
 //! Mitsuba's closed forms (exact for both distributions, anisotropic included).
 
+use crate::render::sampling::square_to_disk;
 use glam::{Vec2, Vec3};
 use statrs::function::erf::{erf_inv, erfc};
 use std::f32::consts::PI;
@@ -355,23 +356,6 @@ impl Microfacet {
     pub fn pdf_all(&self, m: Vec3) -> f32 {
         self.d(m) * m.z
     }
-}
-
-/// Uniform point on the unit disk by Shirley & Chiu's concentric map (the map Mitsuba's
-/// `square_to_uniform_disk_concentric` uses, so GGX samples match Mitsuba's for the same `u`;
-/// the same map as `render::sampling::square_to_disk`, repeated to keep this file
-/// self-contained).
-fn square_to_disk(u: Vec2) -> Vec2 {
-    let a = 2.0 * u - Vec2::ONE;
-    if a.x == 0.0 && a.y == 0.0 {
-        return Vec2::ZERO;
-    }
-    let (r, phi) = if a.x.abs() > a.y.abs() {
-        (a.x, (PI / 4.0) * (a.y / a.x))
-    } else {
-        (a.y, PI / 2.0 - (PI / 4.0) * (a.x / a.y))
-    };
-    Vec2::new(r * phi.cos(), r * phi.sin())
 }
 
 /// Visible slope `(x, y)` of the `α = 1` Beckmann surface seen at `cos θ = cos_theta > 0` from

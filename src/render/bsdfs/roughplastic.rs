@@ -53,6 +53,7 @@ use super::fresnel::fresnel_dielectric;
 use super::microfacet::{Distribution, Microfacet};
 use super::plastic::{DEFAULT_EXT_IOR, DEFAULT_INT_IOR, internal_scattering};
 use super::{Bsdf, BsdfSample, NONE, SurfacePoint};
+use crate::dist::special::gauss_legendre_rule;
 use crate::error::{Num, Result};
 use crate::limits::shorten;
 use crate::render::mitsuba::Params;
@@ -176,38 +177,10 @@ impl RoughPlastic {
     }
 }
 
-/// Nodes and weights of the `n`-point Gauss–Legendre rule on `[−1, 1]`, by Newton's method on
-/// the Legendre polynomial from Tricomi's initial guesses.
-fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
-    (0..n)
-        .map(|i| {
-            let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-            let mut dp = 1.0;
-            for _ in 0..100 {
-                // p_k = ((2k − 1) x p_{k−1} − (k − 1) p_{k−2}) / k.
-                let (mut p_prev, mut p) = (1.0, x);
-                for k in 2..=n {
-                    let kf = k as f64;
-                    let p_next = ((2.0 * kf - 1.0) * x * p - (kf - 1.0) * p_prev) / kf;
-                    p_prev = p;
-                    p = p_next;
-                }
-                dp = n as f64 * (x * p - p_prev) / (x * x - 1.0);
-                let step = p / dp;
-                x -= step;
-                if step.abs() < 1e-15 {
-                    break;
-                }
-            }
-            (x, 2.0 / ((1.0 - x * x) * dp * dp))
-        })
-        .collect()
-}
-
 /// Mitsuba's choice of rule: 32 nodes per axis when the relative index exceeds 1, else 128
 /// (total internal reflection makes the integrand of an index below 1 discontinuous).
 fn rule_for(eta: f32) -> Vec<(f64, f64)> {
-    gauss_legendre(if eta > 1.0 { 32 } else { 128 })
+    gauss_legendre_rule(if eta > 1.0 { 32 } else { 128 })
 }
 
 /// Mitsuba's `eval_transmittance` (`transmit`) or `eval_reflectance` at one `wi`, with relative

@@ -12,7 +12,6 @@
 //! Mitsuba classes the transmission as a *null* interaction (a delta lobe the path integrator
 //! treats like any other bounce); its shadow rays, like ours, see the pane as opaque.
 
-use super::dielectric::{DEFAULT_EXT_IOR, DEFAULT_INT_IOR};
 use super::fresnel::fresnel_dielectric;
 use super::{Bsdf, BsdfSample, NONE, SurfacePoint, reflect_z};
 use crate::error::Result;
@@ -52,17 +51,11 @@ impl ThinDielectric {
 
 /// Reads `<bsdf type="thindielectric">`.
 pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
-    let int_ior = p.ior("int_ior")?;
-    let ext_ior = p.ior("ext_ior")?;
-    let reflect = p.texture("specular_reflectance")?;
-    let transmit = p.texture("specular_transmittance")?;
-    p.finish()?;
-    let int_ior = int_ior.map_or(DEFAULT_INT_IOR, |(v, _)| v);
-    let ext_ior = ext_ior.map_or(DEFAULT_EXT_IOR, |(v, _)| v);
+    let smooth = super::dielectric::read_smooth(p)?;
     Ok(Arc::new(ThinDielectric {
-        eta: int_ior / ext_ior,
-        specular_reflectance: reflect.map_or(Spectrum::grey(1.0), |(t, _)| t),
-        specular_transmittance: transmit.map_or(Spectrum::grey(1.0), |(t, _)| t),
+        eta: smooth.eta,
+        specular_reflectance: smooth.specular_reflectance,
+        specular_transmittance: smooth.specular_transmittance,
     }))
 }
 
