@@ -920,7 +920,7 @@ fn numbers_in_messages_are_short() {
 /// Loading is linear in the scene's size: 20,000 spheres load, and an error after them names
 /// its line (the loader finds lines in an index built once instead of scanning the file from
 /// its start for each element). The non-timing guard against the quadratic loader is the unit
-/// test `a_successful_load_looks_up_no_line` in `src/render/mitsuba.rs`.
+/// test `a_successful_load_looks_up_no_line` in `src/render/mitsuba/mod.rs`.
 #[test]
 fn large_scenes_load_and_late_errors_name_their_line() {
     let mut body = String::new();

@@ -20,7 +20,7 @@ use glam::Vec3;
 /// Unpolarised Fresnel reflectance of a smooth dielectric interface (Mitsuba's `fresnel`).
 ///
 /// `cos_theta_i` is `wi·n` (its sign says which side `wi` is on: `≥ 0` is outside) and `eta` is
-/// `int_ior / ext_ior`. Same contract as `render::bsdf::fresnel_dielectric`, with Mitsuba's
+/// `int_ior / ext_ior`, with Mitsuba's
 /// precedence at the corners (index-matched beats grazing; `−0` is outside). Returns
 /// `(F, cos_theta_t, eta_it, eta_ti)`:
 /// * `F` — reflectance (1 under total internal reflection and at grazing incidence, 0 for an
