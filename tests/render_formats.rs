@@ -164,3 +164,50 @@ fn rectangles_have_mitsubas_texture_coordinates() {
         assert_eq!(uv.y, (p.y + 1.0) / 2.0);
     }
 }
+
+/// Mitsuba 3.9.1's cube texture coordinates: `si.uv` of its `cube` hit at three points per face
+/// (read in the venv with `scene.ray_intersect`), against ours; the mesh's vertices carry the
+/// same map, which is linear on each face, so every interpolated hit agrees too.
+#[test]
+fn cubes_have_mitsubas_texture_coordinates() {
+    use fireflies::render::shapes::mesh::cube_uv;
+    use glam::Vec2;
+    #[rustfmt::skip]
+    let mitsuba: [([f32; 3], [f32; 2]); 18] = [
+        ([-1.0, 0.5, 0.25], [0.75, 0.625]), ([-1.0, -0.5, 0.25], [0.25, 0.625]),
+        ([-1.0, 0.5, -0.75], [0.75, 0.125]), ([1.0, 0.5, 0.25], [0.75, 0.375]),
+        ([1.0, -0.5, 0.25], [0.25, 0.375]), ([1.0, 0.5, -0.75], [0.75, 0.875]),
+        ([0.5, -1.0, 0.25], [0.625, 0.75]), ([-0.5, -1.0, 0.25], [0.625, 0.25]),
+        ([0.5, -1.0, -0.75], [0.125, 0.75]), ([0.5, 1.0, 0.25], [0.25, 0.375]),
+        ([-0.5, 1.0, 0.25], [0.75, 0.375]), ([0.5, 1.0, -0.75], [0.25, 0.875]),
+        ([0.5, 0.25, -1.0], [0.375, 0.75]), ([-0.5, 0.25, -1.0], [0.375, 0.25]),
+        ([0.5, -0.75, -1.0], [0.875, 0.75]), ([0.5, 0.25, 1.0], [0.625, 0.75]),
+        ([-0.5, 0.25, 1.0], [0.625, 0.25]), ([0.5, -0.75, 1.0], [0.125, 0.75]),
+    ];
+    for (p, uv) in mitsuba {
+        assert_eq!(cube_uv(Vec3::from(p)), Vec2::from(uv), "at {p:?}");
+    }
+    let xml = OLD.replace(
+        r#"<shape type="sphere"><ref id="Glass"/></shape>"#,
+        r#"<shape type="cube"/>"#,
+    );
+    let scene = load(&xml).unwrap();
+    let GeometryDesc::Mesh(mesh) = &scene.shapes[1].geometry else {
+        panic!("a cube is a mesh");
+    };
+    // Every triangle's interpolated uv at its centroid (inside one face, so the face is
+    // unambiguous) is the face's map there; at the corner vertices themselves every axis has
+    // |p| = 1, which once gave all corners the x face's coordinates.
+    let uvs = mesh.uvs.as_ref().expect("cubes have uvs");
+    for t in &mesh.indices {
+        let p = t.map(|i| mesh.positions[i as usize]);
+        let uv = t.map(|i| uvs[i as usize]);
+        let centroid = (p[0] + p[1] + p[2]) / 3.0;
+        let interpolated = (uv[0] + uv[1] + uv[2]) / 3.0;
+        let want = cube_uv(centroid);
+        assert!(
+            (interpolated - want).abs().max_element() < 1e-6,
+            "triangle at {centroid}: {interpolated} against {want}"
+        );
+    }
+}

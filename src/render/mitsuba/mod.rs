@@ -1023,7 +1023,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                     return Err(self.err(
                         *bsdf,
                         "this bsdf has a texture, but the shape has no texture coordinates \
-                         (only rectangles and OBJ meshes with vt lines have them here)",
+                         (only rectangles, cubes and OBJ meshes with vt lines have them here)",
                     ));
                 }
                 loaded

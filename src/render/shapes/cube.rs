@@ -1,5 +1,5 @@
-//! Mitsuba's `cube`: the mesh of `[-1,1]³` with outward normals, mapped by `to_world`. Its
-//! texture coordinates are not modelled (the loader refuses textures on it).
+//! Mitsuba's `cube`: the mesh of `[-1,1]³` with outward normals and Mitsuba's texture
+//! coordinates, mapped by `to_world`.
 
 use super::mesh::{cube_mesh, transform_mesh};
 use crate::error::Result;
@@ -11,8 +11,12 @@ pub fn load(p: &mut Params) -> Result<GeometryDesc> {
     let to_world = p.transform("to_world")?;
     p.finish()?;
     let to_world = p.loader().affine(to_world)?;
-    let (positions, indices) = cube_mesh();
+    let (positions, uvs, indices) = cube_mesh();
     Ok(GeometryDesc::Mesh(transform_mesh(
-        positions, None, None, indices, to_world,
+        positions,
+        None,
+        Some(uvs),
+        indices,
+        to_world,
     )))
 }

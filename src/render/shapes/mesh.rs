@@ -22,9 +22,11 @@ pub fn rectangle_mesh() -> (Vec<Vec3>, Vec<Vec2>, Vec<[u32; 3]>) {
 }
 
 /// Mitsuba's cube: `[-1,1]³` as 6 faces of 2 triangles, each counter-clockwise seen from
-/// outside (4 vertices per face, as in Mitsuba's mesh).
-pub fn cube_mesh() -> (Vec<Vec3>, Vec<[u32; 3]>) {
+/// outside (4 vertices per face, as in Mitsuba's mesh), with Mitsuba's texture coordinates
+/// ([`cube_uv`]).
+pub fn cube_mesh() -> (Vec<Vec3>, Vec<Vec2>, Vec<[u32; 3]>) {
     let mut positions = Vec::with_capacity(24);
+    let mut uvs = Vec::with_capacity(24);
     let mut indices = Vec::with_capacity(12);
     for axis in 0..3 {
         for sign in [-1.0f32, 1.0] {
@@ -35,17 +37,50 @@ pub fn cube_mesh() -> (Vec<Vec3>, Vec<[u32; 3]>) {
                 std::mem::swap(&mut u, &mut v);
             }
             let first = positions.len() as u32;
-            positions.extend([
+            let corners = [
                 normal - u - v,
                 normal + u - v,
                 normal + u + v,
                 normal - u + v,
-            ]);
+            ];
+            uvs.extend(corners.map(|p| cube_face_uv(axis, sign < 0.0, p)));
+            positions.extend(corners);
             indices.push([first, first + 1, first + 2]);
             indices.push([first, first + 2, first + 3]);
         }
     }
-    (positions, indices)
+    (positions, uvs, indices)
+}
+
+/// The texture coordinates of Mitsuba 3.9.1's cube at the point `p` of one of its faces (the
+/// face whose axis has the largest `|p|` component), linear on each face.
+pub fn cube_uv(p: Vec3) -> Vec2 {
+    let a = p.abs();
+    let axis = if a.x >= a.y && a.x >= a.z {
+        0
+    } else if a.y >= a.z {
+        1
+    } else {
+        2
+    };
+    cube_face_uv(axis, p[axis] < 0.0, p)
+}
+
+/// The texture coordinates on the cube's face `axis` (0 = x), on its negative side if
+/// `negative`, at the point `p` of that face. Read off Mitsuba by intersecting its cube
+/// (`si.uv`) on a 4x4 grid per face; `tests/render_formats.rs` checks them. The face must be
+/// named: at a corner vertex every axis has `|p| = 1`.
+fn cube_face_uv(axis: usize, negative: bool, p: Vec3) -> Vec2 {
+    let half = |a: f32| (a + 1.0) * 0.5;
+    let flip = |a: f32| (1.0 - a) * 0.5;
+    match (axis, negative) {
+        (0, true) => Vec2::new(half(p.y), half(p.z)),
+        (0, false) => Vec2::new(half(p.y), flip(p.z)),
+        (1, true) => Vec2::new(half(p.z), half(p.x)),
+        (1, false) => Vec2::new(flip(p.x), flip(p.z)),
+        (_, true) => Vec2::new(flip(p.y), half(p.x)),
+        (_, false) => Vec2::new(half(p.y), half(p.x)),
+    }
 }
 
 /// Maps an object-space mesh to world space. Normals transform with the inverse transpose;
