@@ -46,10 +46,12 @@ impl RoughConductor {
 }
 
 /// Reads an isotropic microfacet distribution as Mitsuba's rough BSDFs do: `distribution`
-/// (`beckmann`, Mitsuba's default, or `ggx`), `alpha` (default 0.1, > 0), `sample_visible`
-/// (only `true`, Mitsuba's default). Anisotropic roughness is refused: it needs Mitsuba's
-/// tangent frame (from `dp/du`), which the renderer does not model.
-pub(super) fn read_distribution(p: &mut Params) -> Result<Microfacet> {
+/// (`beckmann`, Mitsuba's default, or `ggx`), `alpha` (default 0.1, > 0), and returns
+/// `sample_visible` as given (each plugin decides what it supports). Anisotropic roughness is
+/// refused: it needs Mitsuba's tangent frame (from `dp/du`), which the renderer does not model.
+pub(super) fn read_distribution<'a, 'i>(
+    p: &mut Params<'_, 'a, 'i>,
+) -> Result<(Microfacet, At<'a, 'i, bool>)> {
     for name in ["alpha_u", "alpha_v"] {
         p.reject(
             name,
@@ -59,12 +61,6 @@ pub(super) fn read_distribution(p: &mut Params) -> Result<Microfacet> {
     let distribution = p.string("distribution")?;
     let alpha = p.float("alpha")?;
     let sample_visible = p.boolean("sample_visible")?;
-    if let Some((false, at)) = sample_visible {
-        return Err(p.err(
-            Some(at),
-            "sample_visible = false is not modelled; only true (Mitsuba's default)",
-        ));
-    }
     let kind = match distribution {
         None => Distribution::Beckmann,
         Some((d, at)) => Distribution::from_name(&d).ok_or_else(|| {
@@ -75,30 +71,36 @@ pub(super) fn read_distribution(p: &mut Params) -> Result<Microfacet> {
         })?,
     };
     let alpha_value = alpha.as_ref().map_or(0.1, |(a, _)| *a);
-    check_alpha(p, alpha_value, alpha)?;
-    Ok(Microfacet::isotropic(kind, alpha_value))
+    if !(alpha_value > 0.0) {
+        return Err(p.err(
+            alpha.map(|(_, at)| at),
+            format!(
+                "alpha = {}: must be > 0 (use the smooth plugin for a perfectly smooth surface)",
+                Num::from_f32(alpha_value)
+            ),
+        ));
+    }
+    Ok((Microfacet::isotropic(kind, alpha_value), sample_visible))
 }
 
-/// `alpha` must be a positive roughness.
-fn check_alpha(p: &Params, value: f32, given: At<f32>) -> Result<()> {
-    if value > 0.0 {
-        return Ok(());
+/// Refuses `sample_visible = false` where only Mitsuba's default is modelled.
+pub(super) fn require_visible_sampling(p: &Params, sample_visible: At<bool>) -> Result<()> {
+    match sample_visible {
+        Some((false, at)) => Err(p.err(
+            Some(at),
+            "sample_visible = false is not modelled; only true (Mitsuba's default)",
+        )),
+        _ => Ok(()),
     }
-    Err(p.err(
-        given.map(|(_, at)| at),
-        format!(
-            "alpha = {}: must be > 0 (use the smooth plugin for a perfectly smooth surface)",
-            Num::from_f32(value)
-        ),
-    ))
 }
 
 /// Reads `<bsdf type="roughconductor">`.
 pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
     let ior = read_complex_ior(p)?;
-    let distribution = read_distribution(p)?;
+    let (distribution, sample_visible) = read_distribution(p)?;
     let tint = p.texture("specular_reflectance")?;
     p.finish()?;
+    require_visible_sampling(p, sample_visible)?;
     Ok(Arc::new(RoughConductor {
         distribution,
         ior,

@@ -42,10 +42,10 @@
 
 use super::dielectric::{DEFAULT_EXT_IOR, DEFAULT_INT_IOR};
 use super::fresnel::fresnel_dielectric;
-use super::microfacet::{Distribution, Microfacet};
+use super::microfacet::Microfacet;
+use super::roughconductor::{read_distribution, require_visible_sampling};
 use super::{Bsdf, BsdfSample, NONE, SurfacePoint};
 use crate::error::{Num, Result};
-use crate::limits::shorten;
 use crate::render::mitsuba::Params;
 use crate::render::scene::Rgb;
 use crate::render::textures::Spectrum;
@@ -82,22 +82,13 @@ impl RoughDielectric {
 
 /// Reads `<bsdf type="roughdielectric">`.
 pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
-    for name in ["alpha_u", "alpha_v"] {
-        p.reject(
-            name,
-            "anisotropic roughness is not modelled (Mitsuba aligns it with the uv \
-             parameterisation, which the shading frame here does not follow); use \
-             <float name=\"alpha\">",
-        )?;
-    }
     let int_ior = p.ior("int_ior")?;
     let ext_ior = p.ior("ext_ior")?;
-    let distribution = p.string("distribution")?;
-    let alpha = p.float("alpha")?;
-    let sample_visible = p.boolean("sample_visible")?;
+    let (microfacet, sample_visible) = read_distribution(p)?;
     let reflect = p.texture("specular_reflectance")?;
     let transmit = p.texture("specular_transmittance")?;
     p.finish()?;
+    require_visible_sampling(p, sample_visible)?;
 
     let int_value = int_ior.as_ref().map_or(DEFAULT_INT_IOR, |(v, _)| *v);
     let ext_value = ext_ior.as_ref().map_or(DEFAULT_EXT_IOR, |(v, _)| *v);
@@ -112,36 +103,8 @@ pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
             ),
         ));
     }
-    let distribution = match distribution {
-        None => Distribution::Beckmann,
-        Some((name, at)) => Distribution::from_name(&name).ok_or_else(|| {
-            p.err(
-                Some(at),
-                format!(
-                    "distribution \"{}\" is not known; use \"beckmann\" or \"ggx\"",
-                    shorten(&name)
-                ),
-            )
-        })?,
-    };
-    if let Some((false, at)) = sample_visible {
-        return Err(p.err(
-            Some(at),
-            "sample_visible = false is not modelled; only true (Mitsuba's default)",
-        ));
-    }
-    let alpha_value = alpha.as_ref().map_or(DEFAULT_ALPHA, |(a, _)| *a);
-    if !(alpha_value > 0.0 && alpha_value.is_finite()) {
-        return Err(p.err(
-            alpha.map(|(_, at)| at),
-            format!(
-                "alpha = {}: must be finite and > 0 (use a dielectric for a smooth interface)",
-                Num::from_f32(alpha_value)
-            ),
-        ));
-    }
     Ok(Arc::new(RoughDielectric {
-        microfacet: Microfacet::isotropic(distribution, alpha_value),
+        microfacet,
         eta: int_value / ext_value,
         specular_reflectance: reflect.map_or(Spectrum::grey(1.0), |(t, _)| t),
         specular_transmittance: transmit.map_or(Spectrum::grey(1.0), |(t, _)| t),

@@ -52,10 +52,10 @@
 use super::fresnel::fresnel_dielectric;
 use super::microfacet::{Distribution, Microfacet};
 use super::plastic::{DEFAULT_EXT_IOR, DEFAULT_INT_IOR, internal_scattering};
+use super::roughconductor::read_distribution;
 use super::{Bsdf, BsdfSample, NONE, SurfacePoint};
 use crate::dist::special::gauss_legendre_rule;
 use crate::error::{Num, Result};
-use crate::limits::shorten;
 use crate::render::mitsuba::Params;
 use crate::render::sampling::square_to_cosine_hemisphere;
 use crate::render::scene::Rgb;
@@ -253,44 +253,13 @@ fn coating_tables(mf: &Microfacet, eta: f32) -> ([f32; TABLE_RES], f32) {
 /// (default 0.5), `specular_reflectance` (default 1), `nonlinear` (default false). Anisotropic
 /// roughness is refused, as Mitsuba refuses it for this plugin.
 pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
-    for name in ["alpha_u", "alpha_v"] {
-        p.reject(
-            name,
-            "roughplastic has no anisotropic roughness (Mitsuba refuses it too); use <float \
-             name=\"alpha\">",
-        )?;
-    }
-    let distribution = p.string("distribution")?;
-    let alpha = p.float("alpha")?;
-    let sample_visible = p.boolean("sample_visible")?;
+    let (microfacet, sample_visible) = read_distribution(p)?;
     let int_ior = p.ior("int_ior")?;
     let ext_ior = p.ior("ext_ior")?;
     let diffuse = p.texture("diffuse_reflectance")?;
     let specular = p.texture("specular_reflectance")?;
     let nonlinear = p.boolean("nonlinear")?;
     p.finish()?;
-    let distribution = match distribution {
-        None => Distribution::Beckmann,
-        Some((name, at)) => Distribution::from_name(&name).ok_or_else(|| {
-            p.err(
-                Some(at),
-                format!(
-                    "distribution \"{}\" is not known; Mitsuba's are \"beckmann\" and \"ggx\"",
-                    shorten(&name)
-                ),
-            )
-        })?,
-    };
-    let alpha_value = alpha.as_ref().map_or(DEFAULT_ALPHA, |(a, _)| *a);
-    if !(alpha_value > 0.0) {
-        return Err(p.err(
-            alpha.map(|(_, at)| at),
-            format!(
-                "alpha = {}: must be > 0 (use plastic for a smooth coating)",
-                Num::from_f32(alpha_value)
-            ),
-        ));
-    }
     let int = int_ior.map_or(DEFAULT_INT_IOR, |(v, _)| v);
     let ext = ext_ior.as_ref().map_or(DEFAULT_EXT_IOR, |(v, _)| *v);
     if int == ext {
@@ -304,8 +273,8 @@ pub fn load(p: &mut Params) -> Result<Arc<dyn Bsdf>> {
     }
     Ok(Arc::new(
         RoughPlastic::new(
-            distribution,
-            alpha_value,
+            microfacet.distribution(),
+            microfacet.alpha_u(),
             int / ext,
             diffuse.map_or(Spectrum::grey(0.5), |(d, _)| d),
             specular.map(|(s, _)| s),
