@@ -78,6 +78,9 @@ use std::f32::consts::PI;
 /// Smallest roughness used (Mitsuba clamps `alpha_u` and `alpha_v` to the same bound).
 pub const MIN_ALPHA: f32 = 1e-4;
 
+/// Mitsuba's default roughness of its rough BSDFs.
+pub const DEFAULT_ALPHA: f32 = 0.1;
+
 /// Slopes of the `α = 1` Beckmann sampler are confined to `[−SLOPE_MAX, SLOPE_MAX]`: the
 /// Gaussian mass beyond is `erfc(8)/2 ≈ 10⁻²⁹`.
 const SLOPE_MAX: f64 = 8.0;

@@ -12,7 +12,7 @@
 //! at `1e-4`.
 
 use super::conductor::{ComplexIor, read_complex_ior};
-use super::microfacet::{Distribution, Microfacet};
+use super::microfacet::{DEFAULT_ALPHA, Distribution, Microfacet};
 use super::{Bsdf, BsdfSample, NONE, SurfacePoint};
 use crate::error::{Num, Result};
 use crate::limits::shorten;
@@ -70,7 +70,7 @@ pub(super) fn read_distribution<'a, 'i>(
             )
         })?,
     };
-    let alpha_value = alpha.as_ref().map_or(0.1, |(a, _)| *a);
+    let alpha_value = alpha.as_ref().map_or(DEFAULT_ALPHA, |(a, _)| *a);
     if !(alpha_value > 0.0) {
         return Err(p.err(
             alpha.map(|(_, at)| at),

@@ -52,9 +52,6 @@ use crate::render::textures::Spectrum;
 use glam::{Vec2, Vec3};
 use std::sync::Arc;
 
-/// Mitsuba's default roughness.
-pub const DEFAULT_ALPHA: f32 = 0.1;
-
 /// A rough dielectric interface.
 #[derive(Debug, Clone)]
 pub struct RoughDielectric {

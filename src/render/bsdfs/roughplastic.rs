@@ -68,9 +68,6 @@ use std::sync::Arc;
 /// Entries of the transmittance table (Mitsuba's `MI_ROUGH_TRANSMITTANCE_RES`).
 pub const TABLE_RES: usize = 64;
 
-/// Mitsuba's default roughness.
-pub const DEFAULT_ALPHA: f32 = 0.1;
-
 /// A rough plastic.
 #[derive(Debug, Clone)]
 pub struct RoughPlastic {
