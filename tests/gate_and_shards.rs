@@ -94,7 +94,7 @@ fn a_two_percent_bias_fails_the_gate_and_only_where_it_was_injected() {
     let regressions: Vec<_> = cmp.iter().filter(|c| c.regression).collect();
     assert!(
         regressions.iter().any(|c| c.estimator == "mean"
-            && c.metric == "relative_bias"
+            && c.metric == fireflies::harness::metrics::Metric::RelativeBias
             && c.distribution == "diffuse"),
         "{}",
         gate::table(&cmp)

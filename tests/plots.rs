@@ -20,10 +20,13 @@ fn row(d: &str, e: &str, n: usize, metric: &str, value: f64, ci: Option<(f64, f6
         distribution: d.into(),
         estimator: e.into(),
         n,
-        metric: metric.into(),
+        metric: metric.parse().unwrap(),
         value,
         ci_low: ci.map(|c| c.0),
         ci_high: ci.map(|c| c.1),
+        se: ci.map(|c| (c.1 - c.0) / 3.92),
+        level: ci.map(|_| 0.95),
+        caveat: None,
     }
 }
 

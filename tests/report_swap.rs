@@ -142,7 +142,7 @@ impl Reference {
         let speed = tables::read_results_csv(&out.join("speed.csv")).unwrap();
         assert!(!speed.is_empty(), "{context}");
         for row in speed {
-            let printed = match row.metric.as_str() {
+            let printed = match row.metric.name() {
                 "ns_per_sample" => format!("| {:.2} |", row.value),
                 _ => format!("Drawing samples: {:.2} ns/sample.", row.value),
             };

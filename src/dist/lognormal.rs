@@ -8,7 +8,7 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::TruncatedMoments;
-use super::special::{ln_norm_cdf, norm_cdf, norm_sf};
+use super::special::{ln_norm_cdf, norm_cdf, norm_inv_cdf, norm_sf, unit_f64};
 use crate::error::{Error, Num, Result};
 
 /// `S = exp(mu + sigma Z)` with `Z` standard normal.
@@ -163,6 +163,33 @@ impl LogNormal {
                 variance.max(0.0)
             },
         }
+    }
+
+    /// `P(S >= t)` (continuous: the same as [`LogNormal::sf`]).
+    pub fn mass_from(&self, t: f64) -> f64 {
+        self.sf(t)
+    }
+
+    /// A draw of `S` given `S >= t`, by inverting the normal survival function on the part of
+    /// it above `t` (accurate however far out `t` is).
+    pub fn sample_from<R: Rng + ?Sized>(&self, t: f64, rng: &mut R) -> f64 {
+        let p = self.mass_from(t) * (1.0 - unit_f64(rng));
+        let z = -norm_inv_cdf(p);
+        (self.mu + self.sigma * z).exp().max(t)
+    }
+
+    /// `ln E[(S / c)^k] = k (mu - ln c) + k^2 sigma^2 / 2`.
+    pub fn ln_moment(&self, k: f64, c: f64) -> f64 {
+        k * (self.mu - c.ln()) + 0.5 * k * k * self.sigma * self.sigma
+    }
+
+    /// The share of `E[S^k]` carried by `S >= t`: `P(Z > d - k sigma)`,
+    /// `d = (ln t - mu) / sigma`.
+    pub fn upper_share(&self, k: f64, t: f64) -> f64 {
+        if !(t > 0.0) {
+            return 1.0;
+        }
+        norm_sf(self.standardise(t) - k * self.sigma)
     }
 
     /// One draw, `exp(mu + sigma Z)` with `Z` from rand_distr's ziggurat normal.

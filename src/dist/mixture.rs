@@ -208,6 +208,69 @@ impl Mixture {
         }
     }
 
+    /// `P(S >= t) = sum w_i P_i(S >= t)`.
+    pub fn mass_from(&self, t: f64) -> f64 {
+        self.weighted(|d| d.mass_from(t))
+    }
+
+    /// A draw of `S` given `S >= t`: a component chosen with probability proportional to
+    /// `w_i P_i(S >= t)`, then a draw from its own part above `t`.
+    pub fn sample_from<R: Rng + ?Sized>(&self, t: f64, rng: &mut R) -> f64 {
+        let masses: Vec<f64> = self
+            .weights
+            .iter()
+            .zip(&self.components)
+            .map(|(w, d)| w * d.mass_from(t))
+            .collect();
+        let mut u = unit_f64(rng) * masses.iter().sum::<f64>();
+        for (m, d) in masses.iter().zip(&self.components) {
+            if u < *m {
+                return d.sample_from(t, rng);
+            }
+            u -= m;
+        }
+        let last = masses.iter().rposition(|&m| m > 0.0).unwrap_or(0);
+        self.components[last].sample_from(t, rng)
+    }
+
+    /// `ln E[(S / c)^k]`, combined in log space.
+    pub fn ln_moment(&self, k: f64, c: f64) -> f64 {
+        ln_weighted_sum(self.parts(k, c).map(|(lw, _)| lw))
+    }
+
+    /// The share of `E[S^k]` carried by `S >= t`: the components' shares weighted by their
+    /// parts of the moment.
+    pub fn upper_share(&self, k: f64, t: f64) -> f64 {
+        let parts: Vec<(f64, &Dist)> = self.parts(k, self.mean).collect();
+        let total = ln_weighted_sum(parts.iter().map(|p| p.0));
+        if total == f64::INFINITY {
+            // An infinite moment: the components with it carry all of it.
+            let infinite: Vec<&Dist> = parts
+                .iter()
+                .filter(|p| p.0 == f64::INFINITY)
+                .map(|p| p.1)
+                .collect();
+            return infinite
+                .iter()
+                .map(|d| d.upper_share(k, t))
+                .fold(0.0, f64::max);
+        }
+        parts
+            .iter()
+            .map(|(lw, d)| (lw - total).exp() * d.upper_share(k, t))
+            .sum::<f64>()
+            .min(1.0)
+    }
+
+    /// `(ln(w_i E_i[(S / c)^k]), component)` of the components with positive weight.
+    fn parts(&self, k: f64, c: f64) -> impl Iterator<Item = (f64, &Dist)> {
+        self.weights
+            .iter()
+            .zip(&self.components)
+            .filter(|(w, _)| **w > 0.0)
+            .map(move |(w, d)| (w.ln() + d.ln_moment(k, c), d))
+    }
+
     /// Index of the component a uniform `u` in [0, 1) selects.
     #[inline(always)]
     fn pick(&self, u: f64) -> usize {
@@ -234,6 +297,16 @@ impl Mixture {
             Dist::Mixture(m) => m.sample(rng),
         }
     }
+}
+
+/// `ln sum exp(x_i)`, stable for large terms; `-inf` for no terms.
+fn ln_weighted_sum(xs: impl Iterator<Item = f64>) -> f64 {
+    let xs: Vec<f64> = xs.collect();
+    let max = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if !max.is_finite() {
+        return max;
+    }
+    max + xs.iter().map(|x| (x - max).exp()).sum::<f64>().ln()
 }
 
 impl fmt::Display for Mixture {

@@ -169,6 +169,34 @@ impl Dist {
         dispatch!(self, d => d.truncated_moments(t))
     }
 
+    /// `P(S >= t)`: the mass at or above `t`, atoms at `t` included.
+    pub fn mass_from(&self, t: f64) -> f64 {
+        dispatch!(self, d => d.mass_from(t))
+    }
+
+    /// A draw of `S` given `S >= t` (needs `mass_from(t) > 0`), for simulating only the rare
+    /// part of a law.
+    pub fn sample_from<R: Rng + ?Sized>(&self, t: f64, rng: &mut R) -> f64 {
+        match self {
+            Dist::PointMass(d) => d.value(),
+            Dist::Pareto(d) => d.sample_from(t, rng),
+            Dist::TruncatedPareto(d) => d.sample_from(t, rng),
+            Dist::LogNormal(d) => d.sample_from(t, rng),
+            Dist::Mixture(d) => d.sample_from(t, rng),
+        }
+    }
+
+    /// `ln E[(S / c)^k]` (`inf` when the moment is infinite), scale-free for any `c > 0`.
+    pub fn ln_moment(&self, k: f64, c: f64) -> f64 {
+        dispatch!(self, d => d.ln_moment(k, c))
+    }
+
+    /// The share of `E[S^k]` that samples at or above `t` carry (1 when the moment is
+    /// infinite and `t` is finite). How much a rare part of the law weighs in a moment.
+    pub fn upper_share(&self, k: f64, t: f64) -> f64 {
+        dispatch!(self, d => d.upper_share(k, t))
+    }
+
     /// Smallest and largest value a sample can take (`inf` when unbounded).
     pub fn support(&self) -> (f64, f64) {
         match self {

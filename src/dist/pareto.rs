@@ -124,6 +124,36 @@ impl Pareto {
         }
     }
 
+    /// `P(S >= t)` (the law is continuous: the same as [`Pareto::sf`]).
+    pub fn mass_from(&self, t: f64) -> f64 {
+        self.sf(t)
+    }
+
+    /// A draw of `S` given `S >= t`: the law is memoryless in `ln S`, so it is this Pareto
+    /// with its scale moved up to `t`.
+    pub fn sample_from<R: Rng + ?Sized>(&self, t: f64, rng: &mut R) -> f64 {
+        let e: f64 = Exp1.sample(rng);
+        t.max(self.scale) * (e * self.inv_shape).exp()
+    }
+
+    /// `ln E[(S / c)^k]`: `ln(shape / (shape - k)) + k ln(scale / c)`, infinite for
+    /// `k >= shape`.
+    pub fn ln_moment(&self, k: f64, c: f64) -> f64 {
+        if k >= self.shape {
+            return f64::INFINITY;
+        }
+        (self.shape / (self.shape - k)).ln() + k * log_ratio(self.scale, c)
+    }
+
+    /// The share of `E[S^k]` carried by `S >= t`: `(t / scale)^(k - shape)` (1 when the moment
+    /// is infinite: every finite part is negligible).
+    pub fn upper_share(&self, k: f64, t: f64) -> f64 {
+        if k >= self.shape || t <= self.scale {
+            return 1.0;
+        }
+        ((k - self.shape) * log_ratio(t, self.scale)).exp()
+    }
+
     /// One draw, as `scale * exp(E / shape)` with `E` a standard exponential (ziggurat). This
     /// is the inverse transform `scale * u^(-1/shape)` with `-ln u` drawn directly, which is
     /// faster than `powf` and, unlike a 53-bit `u`, does not cut the tail off near `2^53`-fold
@@ -280,6 +310,49 @@ impl TruncatedPareto {
             mean: self.scale * (1.0 + ew),
             variance: self.scale * (self.scale * vw),
         }
+    }
+
+    /// `P(S >= t)` (continuous: the same as [`TruncatedPareto::sf`]).
+    pub fn mass_from(&self, t: f64) -> f64 {
+        self.sf(t)
+    }
+
+    /// A draw of `S` given `S >= t`: the same law with its scale moved up to `t`, by the
+    /// inverse transform.
+    pub fn sample_from<R: Rng + ?Sized>(&self, t: f64, rng: &mut R) -> f64 {
+        let from = t.clamp(self.scale, self.upper);
+        let mass = -(-self.shape * log_ratio(self.upper, from)).exp_m1();
+        let y = -(-mass * unit_f64(rng)).ln_1p() * self.inv_shape;
+        (from * y.exp()).min(self.upper)
+    }
+
+    /// `∫ x^(k - shape - 1) dx` over `[a, b]` in units of `scale`, times `shape`: the
+    /// untruncated density's partial `k`-th moment, exact at `k = shape`.
+    fn partial_power(&self, k: f64, a: f64, b: f64) -> f64 {
+        let e = k - self.shape;
+        let (la, lb) = (log_ratio(a, self.scale), log_ratio(b, self.scale));
+        if e == 0.0 {
+            self.shape * (lb - la)
+        } else {
+            self.shape * ((e * lb).exp() - (e * la).exp()) / e
+        }
+    }
+
+    /// `ln E[(S / c)^k]`.
+    pub fn ln_moment(&self, k: f64, c: f64) -> f64 {
+        (self.partial_power(k, self.scale, self.upper) / self.mass).ln()
+            + k * log_ratio(self.scale, c)
+    }
+
+    /// The share of `E[S^k]` carried by `S >= t`.
+    pub fn upper_share(&self, k: f64, t: f64) -> f64 {
+        if t <= self.scale {
+            return 1.0;
+        }
+        if t >= self.upper {
+            return 0.0;
+        }
+        self.partial_power(k, t, self.upper) / self.partial_power(k, self.scale, self.upper)
     }
 
     /// One draw of `scale * e^Y`, `Y` exponential with rate `shape` truncated to

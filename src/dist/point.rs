@@ -81,6 +81,24 @@ impl PointMass {
         }
     }
 
+    /// `P(S >= t)`.
+    pub fn mass_from(&self, t: f64) -> f64 {
+        if self.value >= t { 1.0 } else { 0.0 }
+    }
+
+    /// `ln E[(S / c)^k] = k ln(value / c)`.
+    pub fn ln_moment(&self, k: f64, c: f64) -> f64 {
+        if self.value == 0.0 {
+            return if k > 0.0 { f64::NEG_INFINITY } else { 0.0 };
+        }
+        k * (self.value / c).ln()
+    }
+
+    /// 1 when the atom is at or above `t`, else 0.
+    pub fn upper_share(&self, _k: f64, t: f64) -> f64 {
+        self.mass_from(t)
+    }
+
     /// Returns `value`; consumes no randomness.
     #[inline]
     pub fn sample<R: Rng + ?Sized>(&self, _rng: &mut R) -> f64 {

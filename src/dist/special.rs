@@ -91,6 +91,12 @@ pub(crate) fn norm_sf(x: f64) -> f64 {
     }
 }
 
+/// The standard normal quantile `Phi^-1(p) = -sqrt(2) erfc^-1(2p)`, accurate far into the lower
+/// tail (statrs' inverse complementary error function).
+pub(crate) fn norm_inv_cdf(p: f64) -> f64 {
+    -std::f64::consts::SQRT_2 * statrs::function::erf::erfc_inv(2.0 * p)
+}
+
 /// Standard normal CDF, relative accuracy ~1e-15 in the lower tail.
 pub(crate) fn norm_cdf(x: f64) -> f64 {
     norm_sf(-x)

@@ -2,9 +2,10 @@
 //! claim holds"; Holm's step-down procedure across the whole family keeps the probability
 //! that any check fails while every claim holds at `family_alpha`.
 //!
-//! - **Unbiased mean** (finite variance): z-test of the mean's bias with the *exact* standard
-//!   error `sqrt(Var S / (n T))`, not the sample one, which underestimates the spread when
-//!   rare large samples have not occurred yet.
+//! - **Unbiased mean**: the grand mean's relative bias against the law's own null
+//!   ([`super::law::GrandMeanNull`]: a normal body and the exact tail, simulated), not a
+//!   z-test, whose normal grand mean is wrong on the heavy tails this project exists for. A law
+//!   without spread is checked against a rounding tolerance instead.
 //! - **Chebyshev** for the mean: `P(|mean - mu| > k sigma/sqrt(n)) <= 1/k^2`, exact binomial
 //!   test of the exceedance count.
 //! - **Median-of-means deviation bound**: with `M = ceil(8 ln(1/delta))` sets,
@@ -14,30 +15,24 @@
 //!   mu^2/kappa`, with the exact truncated variance; one-sided z-test of the sample variance.
 //! - **Firefly rate** of each robust estimator at the largest n: below a ceiling (exact
 //!   binomial test) and not above the mean's on the same trials (exact McNemar test).
+//!
+//! The Chebyshev and median-of-means bounds hold for every law, so on a given law they are
+//! loose: each such check states the smallest exceedance rate it would catch ([`CheckResult::detects`]).
+//! A NaN p-value fails its check. Checks the configuration asks for but the experiment cannot
+//! run are listed by [`unreachable`].
 
-use super::experiment::{ChecksConfig, Experiment};
+use super::claims::{CheckKind, ChecksConfig, ROUNDING_TOLERANCE, mon_sets};
+use super::experiment::Experiment;
 use super::runner::RunOutput;
-use crate::dist::Dist;
 use crate::estimators::EstimatorSpec;
 use serde::Serialize;
 use statrs::distribution::{Binomial, ContinuousCDF, DiscreteCDF, Normal};
 
-/// Every check kind, as named in results and in `checks.findings`.
-pub const KINDS: [&str; 6] = [
-    "unbiased",
-    "chebyshev",
-    "mon-bound",
-    "zirr-bound",
-    "firefly-ceiling",
-    "firefly-vs-mean",
-];
-
 /// Outcome of one check.
 #[derive(Debug, Clone, Serialize)]
 pub struct CheckResult {
-    /// Which claim (`unbiased`, `chebyshev`, `mon-bound`, `zirr-bound`, `firefly-ceiling`,
-    /// `firefly-vs-mean`).
-    pub check: &'static str,
+    /// Which claim.
+    pub check: CheckKind,
     /// Distribution label.
     pub distribution: String,
     /// Estimator spec string.
@@ -48,7 +43,7 @@ pub struct CheckResult {
     pub claim: String,
     /// What was observed.
     pub observed: String,
-    /// p-value under the claim.
+    /// p-value under the claim (NaN fails the check, whatever Holm's order).
     pub p_value: f64,
     /// Holm's threshold this p-value was compared with (`None` once a smaller p passed).
     pub holm_alpha: Option<f64>,
@@ -56,6 +51,9 @@ pub struct CheckResult {
     pub passed: bool,
     /// Whether a failure fails the run (false: the check is a reported finding).
     pub gating: bool,
+    /// The smallest defect the check could have caught here, where that is far from what a
+    /// correct estimator shows (a bound that is loose for this law).
+    pub detects: Option<String>,
 }
 
 impl CheckResult {
@@ -65,29 +63,62 @@ impl CheckResult {
     }
 }
 
-/// Sets of the median-of-means bound for a failure probability `delta`.
-pub fn mon_sets(delta: f64) -> usize {
-    (8.0 * (1.0 / delta).ln()).ceil() as usize
-}
-
-/// The bound on `|X - mu|` that a check counts exceedances of, for one cell.
-pub fn deviation_threshold(
+/// Checks the configuration asks for that cannot run on this experiment, in words naming the
+/// estimator or setting; printed before a run and listed in the summary.
+pub fn unreachable(
     cfg: &ChecksConfig,
-    spec: &EstimatorSpec,
-    dist: &Dist,
-    n: usize,
-) -> Option<f64> {
-    let sigma = dist.mean() * dist.relative_variance()?.sqrt();
-    let nf = n as f64;
-    match *spec {
-        EstimatorSpec::Mean if cfg.chebyshev_k > 0.0 => Some(cfg.chebyshev_k * sigma / nf.sqrt()),
-        EstimatorSpec::Mon { m }
-            if cfg.mon_delta > 0.0 && m == mon_sets(cfg.mon_delta) && n >= m =>
-        {
-            Some(sigma * (32.0 * (1.0 / cfg.mon_delta).ln() / nf).sqrt())
+    estimators: &[EstimatorSpec],
+    checkpoints: &[usize],
+) -> Vec<String> {
+    let mut out = Vec::new();
+    if cfg.mon_delta > 0.0 {
+        let m = mon_sets(cfg.mon_delta);
+        let mons: Vec<usize> = estimators
+            .iter()
+            .filter_map(|s| match s {
+                EstimatorSpec::Mon { m } => Some(*m),
+                _ => None,
+            })
+            .collect();
+        if !mons.contains(&m) {
+            out.push(format!(
+                "checks.mon_delta = {} needs mon:M={m} (M = ceil(8 ln(1/delta))), which the \
+                 experiment does not run (it runs {}): the median-of-means bound is not checked",
+                cfg.mon_delta,
+                if mons.is_empty() {
+                    "no mon estimator".to_string()
+                } else {
+                    mons.iter()
+                        .map(|m| format!("mon:M={m}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                }
+            ));
+        } else {
+            let below: Vec<String> = checkpoints
+                .iter()
+                .filter(|&&n| n < m)
+                .map(|n| n.to_string())
+                .collect();
+            if !below.is_empty() {
+                out.push(format!(
+                    "the median-of-means bound needs n >= M = {m}: not checked at n = {}",
+                    below.join(", ")
+                ));
+            }
         }
-        _ => None,
     }
+    if cfg.zirr_bound
+        && !estimators
+            .iter()
+            .any(|s| matches!(s, EstimatorSpec::Zirr(_)))
+    {
+        out.push("checks.zirr_bound is on but the experiment runs no zirr estimator".into());
+    }
+    if cfg.chebyshev_k > 0.0 && !estimators.contains(&EstimatorSpec::Mean) {
+        out.push("checks.chebyshev_k is set but the experiment does not run the mean".into());
+    }
+    out
 }
 
 fn normal_sf(z: f64) -> f64 {
@@ -112,52 +143,84 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
     let cps = &exp.file.checkpoints;
     let t = out.trials;
     let mut results = Vec::new();
+    // (index, bound, observed rate) of the deviation-bound checks, whose power is stated.
+    let mut bounds = Vec::new();
     let robust: Vec<EstimatorSpec> = cfg.robust.iter().filter_map(|r| r.parse().ok()).collect();
     for (d, dist) in out.dists.iter().zip(&exp.distributions) {
         for (e, spec) in exp.estimators.iter().enumerate() {
             for (i, &n) in cps.iter().enumerate() {
                 let cell = &d.cells[e * cps.len() + i];
-                let mut push =
-                    |check: &'static str, claim: String, observed: String, p_value: f64| {
-                        results.push(CheckResult {
-                            check,
-                            distribution: d.label.clone(),
-                            estimator: spec.to_string(),
-                            n,
-                            claim,
-                            observed,
-                            p_value,
-                            holm_alpha: None,
-                            passed: true,
-                            gating: !cfg.findings.iter().any(|f| f == check),
-                        });
-                    };
+                let mut push = |check: CheckKind,
+                                claim: String,
+                                observed: String,
+                                p_value: f64,
+                                detects: Option<String>| {
+                    results.push(CheckResult {
+                        check,
+                        distribution: d.label.clone(),
+                        estimator: spec.to_string(),
+                        n,
+                        claim,
+                        observed,
+                        p_value,
+                        holm_alpha: None,
+                        passed: true,
+                        gating: !cfg.findings.contains(&check),
+                        detects,
+                    });
+                    results.len() - 1
+                };
                 // Relative units (X / mu): finite at any scale of the law.
                 let moments = cell.relative_estimate_moments();
-                if let (EstimatorSpec::Mean, true, Some(rel_var)) =
-                    (spec, cfg.unbiased_mean, dist.dist.relative_variance())
-                {
-                    let se = (rel_var / (n as f64 * t as f64)).sqrt();
+                if let (EstimatorSpec::Mean, true) = (spec, cfg.unbiased_mean) {
                     let bias = moments.mean() - 1.0;
-                    let z = bias / se;
+                    let (observed, p_value) = match d.mean_laws[i]
+                        .as_ref()
+                        .and_then(|l| l.null.as_ref())
+                    {
+                        Some(null) => (
+                            format!(
+                                "relative bias {bias:.3e}; the law's null of the grand mean of {} samples",
+                                t * n as u64
+                            ),
+                            null.p_two_sided(bias),
+                        ),
+                        // A law without spread: the mean is exact up to rounding.
+                        None => (
+                            format!(
+                                "relative bias {bias:.3e} on a law without spread (tolerance {ROUNDING_TOLERANCE:.1e})"
+                            ),
+                            if bias.abs() <= ROUNDING_TOLERANCE {
+                                1.0
+                            } else {
+                                0.0
+                            },
+                        ),
+                    };
                     push(
-                        "unbiased",
+                        CheckKind::Unbiased,
                         "E[mean] = mu".into(),
-                        format!("relative bias {bias:.3e}, exact SE {se:.3e}, z = {z:.2}"),
-                        (2.0 * normal_sf(z.abs())).min(1.0),
+                        observed,
+                        p_value,
+                        None,
                     );
                 }
                 if let Some((threshold, exceed)) = cell.exceedances() {
                     let (check, bound) = match spec {
-                        EstimatorSpec::Mean => ("chebyshev", 1.0 / (cfg.chebyshev_k.powi(2))),
-                        _ => ("mon-bound", cfg.mon_delta),
+                        EstimatorSpec::Mean => {
+                            (CheckKind::Chebyshev, 1.0 / (cfg.chebyshev_k.powi(2)))
+                        }
+                        _ => (CheckKind::MonBound, cfg.mon_delta),
                     };
-                    push(
+                    let rate = exceed as f64 / t as f64;
+                    let at = push(
                         check,
                         format!("P(|X - mu| > {threshold:.4e}) <= {bound:.4}"),
-                        format!("{exceed}/{t} = {:.4}", exceed as f64 / t as f64),
+                        format!("{exceed}/{t} = {rate:.4}"),
                         binomial_upper(exceed, t, bound),
+                        None,
                     );
+                    bounds.push((at, bound, rate));
                 }
                 if let (EstimatorSpec::Zirr(p), true) = (spec, cfg.zirr_bound) {
                     let trunc = dist.dist.truncated_moments(n as f64 * d.mu / p.kappa);
@@ -177,46 +240,80 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
                         1.0
                     };
                     push(
-                        "zirr-bound",
+                        CheckKind::ZirrBound,
                         format!("Var/mu^2 < {bound:.4e} (eq. 10)"),
                         format!("Var/mu^2 = {s2:.4e} ± {se:.2e}"),
                         p_value,
+                        None,
                     );
                 }
                 if i + 1 == cps.len() && robust.contains(spec) {
                     let fireflies = cell.fireflies();
                     push(
-                        "firefly-ceiling",
+                        CheckKind::FireflyCeiling,
                         format!("P(X > (1+tau) mu) <= {}", cfg.firefly_ceiling),
                         format!("{fireflies}/{t}"),
                         binomial_upper(fireflies, t, cfg.firefly_ceiling),
+                        None,
                     );
                     let (only_here, only_mean) = cell.firefly_discordance();
                     push(
-                        "firefly-vs-mean",
+                        CheckKind::FireflyVsMean,
                         "no more fireflies than the mean on the same trials".into(),
                         format!(
                             "{only_here} trials firefly here only, {only_mean} under the mean only"
                         ),
                         binomial_upper(only_here, only_here + only_mean, 0.5),
+                        None,
                     );
                 }
             }
+        }
+    }
+    // A bound far above what the law gives catches only gross defects: say how gross.
+    let strictest = cfg.family_alpha / results.len().max(1) as f64;
+    for (i, bound, rate) in bounds {
+        let least = smallest_detectable(t, bound, strictest);
+        let floor = rate.max(1.0 / t as f64);
+        if least > 2.0 * floor {
+            results[i].detects = Some(format!(
+                "fails only when the rate reaches {least:.4}, {:.0}x the rate observed here",
+                least / floor
+            ));
         }
     }
     holm(&mut results, cfg.family_alpha);
     results
 }
 
+/// The smallest exceedance rate whose expected count the one-sided binomial test against
+/// `bound` rejects at `alpha` over `trials` trials.
+fn smallest_detectable(trials: u64, bound: f64, alpha: f64) -> f64 {
+    let (mut lo, mut hi) = (0u64, trials);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if binomial_upper(mid, trials, bound) <= alpha {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    lo as f64 / trials as f64
+}
+
 /// Holm's step-down procedure: reject in ascending p order while `p <= alpha / (m - rank)`.
+/// A NaN p-value fails its check outright, wherever Holm's order would have put it.
 fn holm(results: &mut [CheckResult], alpha: f64) {
     let m = results.len();
-    let mut order: Vec<usize> = (0..m).collect();
+    for r in results.iter_mut().filter(|r| r.p_value.is_nan()) {
+        r.passed = false;
+    }
+    let mut order: Vec<usize> = (0..m).filter(|&i| !results[i].p_value.is_nan()).collect();
     order.sort_by(|&a, &b| results[a].p_value.total_cmp(&results[b].p_value));
     for (rank, &i) in order.iter().enumerate() {
         let level = alpha / (m - rank) as f64;
         results[i].holm_alpha = Some(level);
-        if results[i].p_value <= level || results[i].p_value.is_nan() {
+        if results[i].p_value <= level {
             results[i].passed = false;
         } else {
             break;
@@ -230,7 +327,7 @@ mod tests {
 
     fn result(p: f64) -> CheckResult {
         CheckResult {
-            check: "unbiased",
+            check: CheckKind::Unbiased,
             distribution: String::new(),
             estimator: String::new(),
             n: 1,
@@ -240,7 +337,28 @@ mod tests {
             holm_alpha: None,
             passed: true,
             gating: true,
+            detects: None,
         }
+    }
+
+    #[test]
+    fn a_nan_p_value_fails_even_after_holm_stops() {
+        let mut r: Vec<_> = [0.5, f64::NAN, 0.9].into_iter().map(result).collect();
+        holm(&mut r, 0.05);
+        assert_eq!(
+            r.iter().map(|c| c.passed).collect::<Vec<_>>(),
+            [true, false, true]
+        );
+    }
+
+    #[test]
+    fn smallest_detectable_rate_is_where_the_test_starts_rejecting() {
+        // Bound 1/9 over 4096 trials at alpha 1e-4: the count k* with P(Bin >= k*) <= 1e-4.
+        let least = smallest_detectable(4096, 1.0 / 9.0, 1e-4);
+        let k = (least * 4096.0).round() as u64;
+        assert!(binomial_upper(k, 4096, 1.0 / 9.0) <= 1e-4);
+        assert!(binomial_upper(k - 1, 4096, 1.0 / 9.0) > 1e-4);
+        assert!(least > 1.0 / 9.0 && least < 0.14, "{least}");
     }
 
     #[test]
@@ -252,12 +370,6 @@ mod tests {
             r.iter().map(|c| c.passed).collect::<Vec<_>>(),
             [false, true, false, true]
         );
-    }
-
-    #[test]
-    fn mon_sets_follow_the_bound() {
-        assert_eq!(mon_sets(0.05), 24);
-        assert_eq!(mon_sets(0.01), 37);
     }
 
     #[test]

@@ -20,6 +20,7 @@
 //! family_alpha = 0.01
 //! ```
 
+use super::claims::ChecksConfig;
 use crate::dist::{Dist, DistSpec};
 use crate::error::{Error, Result};
 use crate::estimators::EstimatorSpec;
@@ -38,48 +39,6 @@ pub struct DistributionEntry {
     pub label: Option<String>,
     /// The generator.
     pub dist: DistSpec,
-}
-
-/// Which claims to check, and at what family-wise error rate.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ChecksConfig {
-    /// Probability that at least one check fails although every claim holds (Holm across
-    /// the whole family).
-    pub family_alpha: f64,
-    /// Test the mean's unbiasedness on every distribution with finite variance.
-    pub unbiased_mean: bool,
-    /// Chebyshev for the mean: `P(|mean - mu| >= k sigma / sqrt(n)) <= 1/k^2`; 0 disables.
-    pub chebyshev_k: f64,
-    /// Median-of-means deviation bound with this delta, checked on the estimator
-    /// `mon:M=ceil(8 ln(1/delta))` when the experiment runs it; 0 disables.
-    pub mon_delta: f64,
-    /// Zirr et al.'s variance bound (their eq. 10) on every `zirr` estimator.
-    pub zirr_bound: bool,
-    /// Estimators whose firefly rate at the largest n must stay below `firefly_ceiling` and
-    /// not exceed the mean's on the same trials.
-    pub robust: Vec<String>,
-    /// Ceiling on the firefly rate `P(X > (1 + tau) mu)` of the `robust` estimators.
-    pub firefly_ceiling: f64,
-    /// Check kinds that test a paper's claim about its method rather than this
-    /// implementation (e.g. `zirr-bound`): a failure is reported as a finding and does not
-    /// make the run exit 1.
-    pub findings: Vec<String>,
-}
-
-impl Default for ChecksConfig {
-    fn default() -> Self {
-        ChecksConfig {
-            family_alpha: 0.01,
-            unbiased_mean: true,
-            chebyshev_k: 3.0,
-            mon_delta: 0.05,
-            zirr_bound: true,
-            robust: Vec::new(),
-            firefly_ceiling: 0.05,
-            findings: Vec::new(),
-        }
-    }
 }
 
 /// An experiment file as written.
@@ -138,6 +97,9 @@ pub struct Experiment {
     pub estimators: Vec<EstimatorSpec>,
     /// Built distributions, in file order.
     pub distributions: Vec<Distribution>,
+    /// Checks the configuration asks for that this experiment cannot run (printed before a
+    /// run and listed in the summary).
+    pub warnings: Vec<String>,
 }
 
 /// A report directory name must be one plain path component, so that `name = "../x"` or
@@ -254,18 +216,6 @@ impl Experiment {
                 "must be in (0, 1]",
             ));
         }
-        for f in &c.findings {
-            if !super::checks::KINDS.contains(&f.as_str()) {
-                return Err(Error::param(
-                    "checks.findings",
-                    f,
-                    format!(
-                        "is not a check kind; valid: {}",
-                        super::checks::KINDS.join(", ")
-                    ),
-                ));
-            }
-        }
         let entry = |list: &str, i: usize, text: &str, e: Error| {
             at(format!("{list}[{i}] = \"{}\"", shorten(text)), &e)
         };
@@ -307,6 +257,13 @@ impl Experiment {
                 .dist
                 .build()
                 .map_err(|e| at(format!("distributions[{i}]"), &e))?;
+            if !(dist.mean() > 0.0) {
+                return Err(at(
+                    format!("distributions[{i}] = {dist}"),
+                    &"its mean is 0 (every sample is 0): relative bias, relative error and the \
+                      firefly threshold (1 + tau) mu are undefined",
+                ));
+            }
             let label = match (&entry.label, &entry.dist) {
                 (Some(l), _) => l.clone(),
                 (None, DistSpec::Preset { name }) => name.clone(),
@@ -332,12 +289,14 @@ impl Experiment {
             .clone()
             .unwrap_or_else(|| default_name.to_string());
         check_name(&name)?;
+        let warnings = super::checks::unreachable(&file.checks, &estimators, &file.checkpoints);
         Ok(Experiment {
             name,
             file,
             source_toml: text.to_string(),
             estimators,
             distributions,
+            warnings,
         })
     }
 

@@ -11,7 +11,7 @@
 //! larger, absolute margin). A cell without an interval in either run (e.g. the mean's
 //! variance on an infinite-variance law) is listed as not gated.
 
-use super::metrics::{Row, Z};
+use super::metrics::{Metric, Row, Z};
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, Normal};
 use std::collections::BTreeMap;
@@ -54,7 +54,7 @@ pub struct Comparison {
     /// Sample count.
     pub n: usize,
     /// Metric.
-    pub metric: String,
+    pub metric: Metric,
     /// Baseline value.
     pub baseline: f64,
     /// Current value.
@@ -82,24 +82,19 @@ fn se(r: &Row) -> Option<f64> {
 
 /// Compares every gated metric present in both tables.
 pub fn compare(baseline: &[Row], now: &[Row], cfg: &GateConfig) -> Vec<Comparison> {
-    let key = |r: &Row| {
-        (
-            r.distribution.clone(),
-            r.estimator.clone(),
-            r.n,
-            r.metric.clone(),
-        )
-    };
+    let key = |r: &Row| (r.distribution.clone(), r.estimator.clone(), r.n, r.metric);
     let base: BTreeMap<_, &Row> = baseline.iter().map(|r| (key(r), r)).collect();
     let std = Normal::new(0.0, 1.0).expect("standard normal");
     let mut out = Vec::new();
     for r in now {
         let Some(b) = base.get(&key(r)) else { continue };
-        let (worsening, margin) = match r.metric.as_str() {
-            "relative_bias" => (r.value.abs() - b.value.abs(), cfg.relative_bias_margin),
-            "variance" => (r.value - b.value, cfg.variance_margin * b.value.abs()),
-            "median_abs_rel_error" => (r.value - b.value, cfg.median_error_margin * b.value.abs()),
-            "firefly_rate" => (r.value - b.value, cfg.firefly_rate_margin),
+        let (worsening, margin) = match r.metric {
+            Metric::RelativeBias => (r.value.abs() - b.value.abs(), cfg.relative_bias_margin),
+            Metric::Variance => (r.value - b.value, cfg.variance_margin * b.value.abs()),
+            Metric::MedianAbsRelError => {
+                (r.value - b.value, cfg.median_error_margin * b.value.abs())
+            }
+            Metric::FireflyRate => (r.value - b.value, cfg.firefly_rate_margin),
             _ => continue,
         };
         let (interval, p_value) = match (se(r), se(b)) {
@@ -120,7 +115,7 @@ pub fn compare(baseline: &[Row], now: &[Row], cfg: &GateConfig) -> Vec<Compariso
             distribution: r.distribution.clone(),
             estimator: r.estimator.clone(),
             n: r.n,
-            metric: r.metric.clone(),
+            metric: r.metric,
             baseline: b.value,
             now: r.value,
             worsening,
@@ -187,10 +182,13 @@ mod tests {
             distribution: "d".into(),
             estimator: "mean".into(),
             n: 16,
-            metric: metric.into(),
+            metric: metric.parse().unwrap(),
             value,
             ci_low: Some(value - half),
             ci_high: Some(value + half),
+            se: Some(half / Z),
+            level: Some(0.95),
+            caveat: None,
         }
     }
 

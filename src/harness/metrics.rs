@@ -12,6 +12,7 @@
 //! within one bin: a factor `10^(1/BINS_PER_DECADE)` (2.3%).
 
 use serde::{Deserialize, Serialize};
+use statrs::distribution::{ChiSquared, ContinuousCDF};
 use std::collections::BTreeMap;
 
 /// Serde for `f64` as its bit pattern: exact, and non-finite values survive JSON.
@@ -133,12 +134,60 @@ impl Moments {
     }
 }
 
-/// Log-binned histogram of non-negative values; zeros have their own bin. Integer counts, so
-/// merging is exact in any order.
+/// Log-binned histogram of non-negative values. Zeros and exact ones have their own atoms: an
+/// estimate of exactly 0 has a relative error of exactly 1, which is common (black pixels) and
+/// must print as 1, not as the centre of the bin holding it. Integer counts, so merging is exact
+/// in any order.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct LogHistogram {
     zeros: u64,
+    #[serde(default)]
+    ones: u64,
     bins: BTreeMap<i32, u64>,
+}
+
+/// Where an order statistic lies: exactly on an atom, or somewhere inside a bin.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Located {
+    /// Exactly this value.
+    Exact(f64),
+    /// Inside `[low, high)`; the geometric centre is the point estimate.
+    Bin {
+        /// Lower edge.
+        low: f64,
+        /// Upper edge.
+        high: f64,
+    },
+}
+
+impl Located {
+    /// The point estimate: the atom, or the bin's geometric centre.
+    pub fn value(self) -> f64 {
+        match self {
+            Located::Exact(v) => v,
+            Located::Bin { low, high } => (low * high).sqrt(),
+        }
+    }
+
+    /// The smallest value it may be.
+    pub fn low(self) -> f64 {
+        match self {
+            Located::Exact(v) => v,
+            Located::Bin { low, .. } => low,
+        }
+    }
+
+    /// The largest value it may be.
+    pub fn high(self) -> f64 {
+        match self {
+            Located::Exact(v) => v,
+            Located::Bin { high, .. } => high,
+        }
+    }
+}
+
+fn bin_edge(b: i32) -> f64 {
+    10f64.powf(f64::from(b) / BINS_PER_DECADE)
 }
 
 impl LogHistogram {
@@ -146,6 +195,10 @@ impl LogHistogram {
     pub fn push(&mut self, x: f64) {
         if x <= 0.0 {
             self.zeros += 1;
+            return;
+        }
+        if x == 1.0 {
+            self.ones += 1;
             return;
         }
         let bin = (x.log10() * BINS_PER_DECADE)
@@ -157,6 +210,7 @@ impl LogHistogram {
     /// Adds another histogram's counts.
     pub fn merge(&mut self, other: &LogHistogram) {
         self.zeros += other.zeros;
+        self.ones += other.ones;
         for (&b, &c) in &other.bins {
             *self.bins.entry(b).or_insert(0) += c;
         }
@@ -164,22 +218,42 @@ impl LogHistogram {
 
     /// Total count.
     pub fn count(&self) -> u64 {
-        self.zeros + self.bins.values().sum::<u64>()
+        self.zeros + self.ones + self.bins.values().sum::<u64>()
     }
 
-    /// The `rank`-th smallest value (1-based), as its bin's geometric centre.
-    pub fn order_statistic(&self, rank: u64) -> f64 {
+    /// Where the `rank`-th smallest value (1-based) lies. The atom 1 sorts inside bin 0
+    /// (`[1, 1.023)`), before every value of that bin.
+    pub fn locate(&self, rank: u64) -> Located {
         let mut seen = self.zeros;
         if rank <= seen {
-            return 0.0;
+            return Located::Exact(0.0);
         }
+        let mut ones_done = false;
         for (&b, &c) in &self.bins {
+            if b >= 0 && !ones_done {
+                ones_done = true;
+                seen += self.ones;
+                if rank <= seen {
+                    return Located::Exact(1.0);
+                }
+            }
             seen += c;
             if rank <= seen {
-                return 10f64.powf((f64::from(b) + 0.5) / BINS_PER_DECADE);
+                return Located::Bin {
+                    low: bin_edge(b),
+                    high: bin_edge(b + 1),
+                };
             }
         }
-        f64::INFINITY
+        if !ones_done && rank <= seen + self.ones {
+            return Located::Exact(1.0);
+        }
+        Located::Exact(f64::INFINITY)
+    }
+
+    /// The `rank`-th smallest value (1-based): the atom, or its bin's geometric centre.
+    pub fn order_statistic(&self, rank: u64) -> f64 {
+        self.locate(rank).value()
     }
 
     /// The q-quantile (`q` in [0, 1]) by the nearest-rank rule.
@@ -188,7 +262,212 @@ impl LogHistogram {
         let rank = ((q * n as f64).ceil() as u64).clamp(1, n.max(1));
         self.order_statistic(rank)
     }
+
+    /// The share of `sum x^power` that the `k` largest values carry, each of them taken at its
+    /// bin's upper edge and the rest at their centres (so the share errs high): whether a
+    /// moment of this run rests on a handful of observations.
+    pub fn top_share(&self, k: u64, power: i32) -> f64 {
+        // (upper edge, centre, count), largest first; the atom 1 sits just below bin 0.
+        let above = self.bins.range(0..).rev();
+        let below = self.bins.range(..0).rev();
+        let bin = |(&b, &c): (&i32, &u64)| {
+            let (lo, hi) = (bin_edge(b), bin_edge(b + 1));
+            (hi, (lo * hi).sqrt(), c)
+        };
+        let groups = above
+            .map(bin)
+            .chain(std::iter::once((1.0, 1.0, self.ones)))
+            .chain(below.map(bin));
+        let (mut top, mut total, mut left) = (0.0, 0.0, k);
+        for (high, centre, count) in groups {
+            let taken = count.min(left);
+            left -= taken;
+            top += taken as f64 * high.powi(power);
+            total += taken as f64 * high.powi(power) + (count - taken) as f64 * centre.powi(power);
+        }
+        if total > 0.0 { top / total } else { 0.0 }
+    }
 }
+
+/// Every metric a report row can carry. One list: the tables write these names, the plots and
+/// the gate read them, and a name that is not here is an error when a table is read back, so a
+/// renamed metric cannot silently drop out of a comparison.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Metric {
+    /// `mean(X) - mu`, in the law's units.
+    Bias,
+    /// `(mean(X) - mu) / mu`.
+    RelativeBias,
+    /// Sample variance of the estimates over trials.
+    Variance,
+    /// The estimator's exact variance from the law (the mean's `sigma^2 / n`), no sampling.
+    ExactVariance,
+    /// Mean squared error against the true mean.
+    Mse,
+    /// `sqrt(MSE) / mu`.
+    RelativeRmse,
+    /// Median over trials of `|X - mu| / mu` (the primary metric).
+    MedianAbsRelError,
+    /// Mean over trials of `|X - mu| / mu`.
+    MeanAbsRelError,
+    /// Quantiles of `|X - mu| / mu`.
+    RelErrorQ05,
+    /// See [`Metric::RelErrorQ05`].
+    RelErrorQ25,
+    /// See [`Metric::RelErrorQ05`].
+    RelErrorQ50,
+    /// See [`Metric::RelErrorQ05`].
+    RelErrorQ75,
+    /// See [`Metric::RelErrorQ05`].
+    RelErrorQ95,
+    /// See [`Metric::RelErrorQ05`].
+    RelErrorQ99,
+    /// `P(X > (1 + tau) mu)`.
+    FireflyRate,
+    /// Trials holding a sample at or above `n mu`.
+    OutlierTrials,
+    /// Among outlier trials, the fraction whose estimate stayed at or below `(1 + tau) mu`.
+    RejectionRate,
+    /// Mean over trials of `|X - mu|/mu - |mean - mu|/mu`.
+    PairedAbsRelVsMean,
+    /// Mean over trials of `(X - mu)^2 - (mean - mu)^2`.
+    PairedMseVsMean,
+    /// Largest per-pixel state at the end of a trial, bytes.
+    StateBytesMax,
+    /// Mean per-pixel state at the end of a trial, bytes.
+    StateBytesMean,
+    /// Push and estimate cost, nanoseconds per sample on one thread (`speed.csv`).
+    NsPerSample,
+    /// Cost of drawing a sample (`speed.csv`, estimator `(generator)`).
+    GenerateNsPerSample,
+}
+
+impl Metric {
+    /// Every metric, in the order a cell's rows are written.
+    pub const ALL: [Metric; 23] = [
+        Metric::Bias,
+        Metric::RelativeBias,
+        Metric::Variance,
+        Metric::ExactVariance,
+        Metric::Mse,
+        Metric::RelativeRmse,
+        Metric::MedianAbsRelError,
+        Metric::MeanAbsRelError,
+        Metric::RelErrorQ05,
+        Metric::RelErrorQ25,
+        Metric::RelErrorQ50,
+        Metric::RelErrorQ75,
+        Metric::RelErrorQ95,
+        Metric::RelErrorQ99,
+        Metric::FireflyRate,
+        Metric::OutlierTrials,
+        Metric::RejectionRate,
+        Metric::PairedAbsRelVsMean,
+        Metric::PairedMseVsMean,
+        Metric::StateBytesMax,
+        Metric::StateBytesMean,
+        Metric::NsPerSample,
+        Metric::GenerateNsPerSample,
+    ];
+
+    /// The error quantiles written per cell, with their levels.
+    pub const QUANTILES: [(f64, Metric); 6] = [
+        (0.05, Metric::RelErrorQ05),
+        (0.25, Metric::RelErrorQ25),
+        (0.50, Metric::RelErrorQ50),
+        (0.75, Metric::RelErrorQ75),
+        (0.95, Metric::RelErrorQ95),
+        (0.99, Metric::RelErrorQ99),
+    ];
+
+    /// The name in tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Metric::Bias => "bias",
+            Metric::RelativeBias => "relative_bias",
+            Metric::Variance => "variance",
+            Metric::ExactVariance => "exact_variance",
+            Metric::Mse => "mse",
+            Metric::RelativeRmse => "relative_rmse",
+            Metric::MedianAbsRelError => "median_abs_rel_error",
+            Metric::MeanAbsRelError => "mean_abs_rel_error",
+            Metric::RelErrorQ05 => "rel_error_q05",
+            Metric::RelErrorQ25 => "rel_error_q25",
+            Metric::RelErrorQ50 => "rel_error_q50",
+            Metric::RelErrorQ75 => "rel_error_q75",
+            Metric::RelErrorQ95 => "rel_error_q95",
+            Metric::RelErrorQ99 => "rel_error_q99",
+            Metric::FireflyRate => "firefly_rate",
+            Metric::OutlierTrials => "outlier_trials",
+            Metric::RejectionRate => "rejection_rate",
+            Metric::PairedAbsRelVsMean => "paired_abs_rel_vs_mean",
+            Metric::PairedMseVsMean => "paired_mse_vs_mean",
+            Metric::StateBytesMax => "state_bytes_max",
+            Metric::StateBytesMean => "state_bytes_mean",
+            Metric::NsPerSample => "ns_per_sample",
+            Metric::GenerateNsPerSample => "generate_ns_per_sample",
+        }
+    }
+}
+
+impl std::fmt::Display for Metric {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Metric {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Metric::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Metric::ALL.iter().map(|m| m.name()).collect();
+                format!("unknown metric \"{s}\"; known: {}", names.join(", "))
+            })
+    }
+}
+
+impl Serialize for Metric {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for Metric {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// Why a row's value carries no interval that could be trusted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Caveat {
+    /// The metric's spread comes from tail events expected fewer than [`TAIL_EVENTS`] times in
+    /// the run: the sample value is what this run saw, and no interval is printed.
+    TailDominated,
+    /// The true value is infinite (e.g. the mean's variance on an infinite-variance law); the
+    /// value column holds `inf` or `-inf`.
+    InfiniteTruth,
+}
+
+impl Caveat {
+    /// The word the summary prints.
+    pub fn label(self) -> &'static str {
+        match self {
+            Caveat::TailDominated => "tail-dominated",
+            Caveat::InfiniteTruth => "infinite",
+        }
+    }
+}
+
+/// A cell's spread counts as tail-dominated when more than half of it comes from events the run
+/// expects fewer than this many times.
+pub const TAIL_EVENTS: f64 = 10.0;
 
 /// One row of a tidy results table (`results.csv`, `speed.csv`, gate baselines).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -199,17 +478,24 @@ pub struct Row {
     pub estimator: String,
     /// Sample count.
     pub n: usize,
-    /// Metric name.
-    pub metric: String,
-    /// Point value.
+    /// Metric.
+    pub metric: Metric,
+    /// Point value (`inf`/`-inf` where the truth is infinite).
     pub value: f64,
-    /// Lower bound of the 95% interval (empty: none meaningful).
+    /// Lower bound of the interval (empty: none meaningful).
     pub ci_low: Option<f64>,
-    /// Upper bound of the 95% interval.
+    /// Upper bound of the interval.
     pub ci_high: Option<f64>,
+    /// Standard error of `value`, as the gate uses it (empty: none meaningful).
+    pub se: Option<f64>,
+    /// Confidence level of the interval (0.95), empty without one.
+    pub level: Option<f64>,
+    /// Why no interval is given, if that is the reason.
+    pub caveat: Option<Caveat>,
 }
 
-/// A point estimate with a 95% confidence interval (`None` bounds where none is meaningful).
+/// A point estimate with a 95% confidence interval and standard error (`None` where none is
+/// meaningful).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Interval {
     /// Point estimate.
@@ -218,6 +504,8 @@ pub struct Interval {
     pub low: Option<f64>,
     /// Upper bound.
     pub high: Option<f64>,
+    /// Standard error of the point estimate.
+    pub se: Option<f64>,
 }
 
 impl Interval {
@@ -227,6 +515,7 @@ impl Interval {
             value,
             low: Some(value - Z * se),
             high: Some(value + Z * se),
+            se: Some(se),
         }
     }
 
@@ -236,9 +525,57 @@ impl Interval {
             value,
             low: None,
             high: None,
+            se: None,
+        }
+    }
+
+    /// An interval for a non-negative quantity estimated by `value` with standard error `se`:
+    /// a scaled chi-square (Satterthwaite) with `2 value^2 / se^2` degrees of freedom, which
+    /// never reaches below 0 and is skewed upwards as the sampling law of a variance is.
+    pub fn non_negative(value: f64, se: f64) -> Self {
+        if !(value >= 0.0 && se >= 0.0 && value.is_finite() && se.is_finite()) {
+            return Interval::bare(value);
+        }
+        if value == 0.0 || se == 0.0 {
+            // Every trial agreed (or the spread underflowed): the interval is the point.
+            return Interval {
+                value,
+                low: Some(value),
+                high: Some(value),
+                se: Some(se),
+            };
+        }
+        let df = 2.0 * (value / se).powi(2);
+        let quantile = |p: f64| {
+            ChiSquared::new(df)
+                .map(|c| c.inverse_cdf(p))
+                .unwrap_or(f64::NAN)
+        };
+        Interval {
+            value,
+            low: Some(value * df / quantile(1.0 - LEVEL_TAIL)),
+            high: Some(value * df / quantile(LEVEL_TAIL)),
+            se: Some(se),
+        }
+    }
+
+    /// The interval mapped through an increasing function (e.g. a square root); `se` is the
+    /// standard error of the mapped value.
+    pub fn map(self, f: impl Fn(f64) -> f64, se: Option<f64>) -> Self {
+        Interval {
+            value: f(self.value),
+            low: self.low.map(&f),
+            high: self.high.map(&f),
+            se,
         }
     }
 }
+
+/// Each tail of a two-sided 95% interval.
+const LEVEL_TAIL: f64 = 0.025;
+
+/// Confidence level of every interval.
+pub const LEVEL: f64 = 0.95;
 
 /// Wilson score interval for `successes` out of `trials` (docs/estimators.md §7).
 pub fn wilson(successes: u64, trials: u64) -> Interval {
@@ -251,6 +588,8 @@ pub fn wilson(successes: u64, trials: u64) -> Interval {
         value: p,
         low: Some((centre - half).max(0.0)),
         high: Some((centre + half).min(1.0)),
+        // The Wilson half-width over Z: never 0, even when no trial succeeded.
+        se: Some(half / Z),
     }
 }
 
@@ -368,7 +707,9 @@ impl CellAccumulator {
         self.estimate.count()
     }
 
-    /// Every metric with its interval; `None` with fewer than 4 trials (docs/estimators.md §7).
+    /// Every metric with its interval, from the trials alone; `None` with fewer than 4 trials
+    /// (docs/estimators.md §7). What the law adds (exact values, tail-dominance) is applied by
+    /// [`super::law`].
     pub fn metrics(&self, mu: f64) -> Option<CellMetrics> {
         let t = self.trials();
         if t < 4 {
@@ -383,12 +724,12 @@ impl CellAccumulator {
             .sqrt();
         let mse = self.squared_error.mean();
         let mse_se = self.squared_error.standard_error();
+        let mse_interval = Interval::non_negative(mse, mse_se);
         let rel_rmse = mse.sqrt();
-        let relative_rmse = if mse > 0.0 {
-            Interval::symmetric(rel_rmse, mse_se / (2.0 * rel_rmse))
-        } else {
-            Interval::bare(rel_rmse)
-        };
+        let relative_rmse = mse_interval.map(
+            f64::sqrt,
+            (rel_rmse > 0.0).then(|| mse_se / (2.0 * rel_rmse)),
+        );
         let half_width = Z * tf.sqrt() / 2.0;
         let j = ((tf / 2.0 - half_width).floor() as u64).max(1);
         let k = ((1.0 + tf / 2.0 + half_width).ceil() as u64).min(t);
@@ -398,25 +739,29 @@ impl CellAccumulator {
         } else {
             (h.order_statistic(t / 2) + h.order_statistic(t / 2 + 1)) / 2.0
         };
+        let (low, high) = (h.locate(j).low(), h.locate(k).high());
         Some(CellMetrics {
             trials: t,
             bias: Interval::symmetric(
                 (self.estimate.mean() - 1.0) * mu,
                 self.estimate.standard_error() * mu,
             ),
-            variance: Interval::symmetric(s2 * mu2, var_se * mu2),
-            mse: Interval::symmetric(mse * mu2, mse_se * mu2),
+            variance: Interval::non_negative(s2, var_se).map(|v| v * mu2, Some(var_se * mu2)),
+            mse: mse_interval.map(|v| v * mu2, Some(mse_se * mu2)),
             relative_rmse,
             median_abs_rel_error: Interval {
                 value: median,
-                low: Some(h.order_statistic(j)),
-                high: Some(h.order_statistic(k)),
+                low: Some(low),
+                high: Some(high),
+                // McKean and Schrader's standard error of a median: the distribution-free
+                // interval's width over 2 Z.
+                se: Some((high - low) / (2.0 * Z)),
             },
-            mean_abs_rel_error: Interval::symmetric(
+            mean_abs_rel_error: Interval::non_negative(
                 self.abs_rel_error.mean(),
                 self.abs_rel_error.standard_error(),
             ),
-            rel_error_quantiles: [0.05, 0.25, 0.5, 0.75, 0.95, 0.99].map(|q| (q, h.quantile(q))),
+            rel_error_quantiles: Metric::QUANTILES.map(|(q, m)| (m, h.quantile(q))),
             firefly_rate: wilson(self.fireflies, t),
             outlier_trials: self.outlier_trials,
             rejection_rate: (self.outlier_trials > 0)
@@ -429,6 +774,10 @@ impl CellAccumulator {
                 self.paired_squared.mean() * mu2,
                 self.paired_squared.standard_error() * mu2,
             ),
+            top_share: [
+                h.top_share(TAIL_EVENTS as u64, 2),
+                h.top_share(TAIL_EVENTS as u64, 4),
+            ],
         })
     }
 }
@@ -450,8 +799,8 @@ pub struct CellMetrics {
     pub median_abs_rel_error: Interval,
     /// Mean of `|X - mu| / mu`.
     pub mean_abs_rel_error: Interval,
-    /// Quantiles `(q, value)` of `|X - mu| / mu`.
-    pub rel_error_quantiles: [(f64, f64); 6],
+    /// Quantiles of `|X - mu| / mu`, by metric.
+    pub rel_error_quantiles: [(Metric, f64); 6],
     /// `P(X > (1 + tau) mu)`, Wilson interval.
     pub firefly_rate: Interval,
     /// Trials holding a sample at or above `n mu`.
@@ -462,6 +811,9 @@ pub struct CellMetrics {
     pub paired_abs_rel_vs_mean: Interval,
     /// Mean over trials of `(X - mu)^2 - (mean - mu)^2` (negative: better than the mean).
     pub paired_mse_vs_mean: Interval,
+    /// The share of `sum |X - mu|^2` and of `sum |X - mu|^4` that the [`TAIL_EVENTS`] largest
+    /// errors of the run carry: above 1/2, the run's spread rests on a handful of trials.
+    pub top_share: [f64; 2],
 }
 
 #[cfg(test)]
@@ -536,8 +888,67 @@ mod tests {
         let bin = 10f64.powf(1.0 / BINS_PER_DECADE);
         let within = |got: f64, want: f64| got / want < bin && want / got < bin;
         assert!(within(m.median_abs_rel_error.value, 0.505));
-        assert!(within(m.median_abs_rel_error.low.unwrap(), 0.40));
-        assert!(within(m.median_abs_rel_error.high.unwrap(), 0.61));
+        // The ends are the edges of the bins holding the 40th and 61st values, so they
+        // enclose them: never narrower than the exact order-statistic interval.
+        let (low, high) = (
+            m.median_abs_rel_error.low.unwrap(),
+            m.median_abs_rel_error.high.unwrap(),
+        );
+        assert!(low <= 0.40 && within(low, 0.40), "{low}");
+        assert!(high > 0.61 && within(high, 0.61), "{high}");
+    }
+
+    #[test]
+    fn an_error_of_exactly_one_is_an_atom() {
+        // Estimates of exactly 0 against mu = 1: every error is exactly 1, and so is the
+        // interval (an atom, not a bin: 1, not the bin centre 1.012).
+        let m = accumulate(&[0.0; 9], 1.0).metrics(1.0).unwrap();
+        assert_eq!(m.median_abs_rel_error.value, 1.0);
+        assert_eq!(m.median_abs_rel_error.low, Some(1.0));
+        assert_eq!(m.median_abs_rel_error.high, Some(1.0));
+        // Mixed with values on both sides, the atom sorts between bins -1 and 0.
+        let mut h = LogHistogram::default();
+        for x in [0.5, 1.0, 1.01, 0.0, 1.0] {
+            h.push(x);
+        }
+        let order: Vec<f64> = (1..=5).map(|r| h.order_statistic(r)).collect();
+        assert_eq!(order[0], 0.0);
+        assert!((order[1] / 0.5 - 1.0).abs() < 0.012);
+        assert_eq!((order[2], order[3]), (1.0, 1.0));
+        assert!((order[4] / 1.01 - 1.0).abs() < 0.012);
+    }
+
+    #[test]
+    fn variance_and_mse_intervals_stay_non_negative() {
+        // One huge error among small ones: the symmetric interval would reach below 0.
+        let mut xs = vec![1.0; 20];
+        xs[3] = 40.0;
+        let m = accumulate(&xs, 1.0).metrics(1.0).unwrap();
+        for iv in [m.variance, m.mse, m.relative_rmse, m.mean_abs_rel_error] {
+            assert!(
+                iv.low.unwrap() >= 0.0 && iv.low.unwrap() < iv.value,
+                "{iv:?}"
+            );
+            assert!(iv.high.unwrap() > iv.value, "{iv:?}");
+        }
+        // Against the chi-square quantiles by hand: df = 2 (v/se)^2 = 8 gives
+        // [8 v / 17.5345, 8 v / 2.17973].
+        let iv = Interval::non_negative(2.0, 1.0);
+        assert!((iv.low.unwrap() - 16.0 / 17.534_546).abs() < 1e-5, "{iv:?}");
+        assert!((iv.high.unwrap() - 16.0 / 2.179_731).abs() < 1e-5, "{iv:?}");
+    }
+
+    #[test]
+    fn top_share_sees_a_run_resting_on_few_trials() {
+        let mut h = LogHistogram::default();
+        for _ in 0..1000 {
+            h.push(0.1);
+        }
+        // Ten errors of 0.1 among a thousand: about 1% of the squares.
+        assert!(h.top_share(10, 2) < 0.011, "{}", h.top_share(10, 2));
+        h.push(100.0);
+        // One error of 100 carries nearly all of sum e^2 = 10 + 10^4.
+        assert!(h.top_share(10, 2) > 0.99);
     }
 
     #[test]

@@ -2,8 +2,10 @@
 //! checks that turn them into pass/fail verdicts with stated error rates.
 
 pub mod checks;
+pub mod claims;
 pub mod experiment;
 pub mod gate;
+pub mod law;
 pub mod metrics;
 pub mod runner;
 pub mod shards;

@@ -8,8 +8,9 @@
 //! makes the floating point results bit-identical on 1 or 64 threads, and lets a run be split
 //! into shards that own whole blocks and merge into the same bits ([`run_shard`], [`fold`]).
 
-use super::checks;
+use super::claims;
 use super::experiment::{Distribution, Experiment};
+use super::law::MeanLaw;
 use super::metrics::{CellAccumulator, Observation};
 use crate::error::{Error, Result};
 use crate::estimators::{Estimator, EstimatorSpec, Mean, validate_samples};
@@ -77,6 +78,9 @@ pub struct DistResult {
     pub state_bytes_max: Vec<usize>,
     /// Per estimator, the sum over trials of the end-of-trial state size (for the mean).
     pub state_bytes_sum: Vec<u64>,
+    /// Per checkpoint, what the law says about the plain mean's cell (`None` when the
+    /// experiment does not run the mean).
+    pub mean_laws: Vec<Option<MeanLaw>>,
 }
 
 impl DistResult {
@@ -217,11 +221,112 @@ pub struct ShardOutput {
     pub blocks: Vec<Vec<BlockStats>>,
 }
 
-/// Runs every distribution of the experiment.
+/// Runs every distribution of the experiment. Each wave of blocks is folded into the total as
+/// soon as it is done, in block order: the same merge tree as [`fold`] over shards, so the same
+/// bits, and memory that does not grow with the number of trials.
 pub fn run(exp: &Experiment, opts: &RunOptions) -> Result<RunOutput> {
-    let shard = run_shard(exp, opts, Shard::ALL)?;
-    fold(exp, std::slice::from_ref(&shard))
+    let trials = trial_count(exp, opts)?;
+    let blocks = 0..trials.div_ceil(BLOCK_TRIALS);
+    let (pool, bar) = prepare(exp, opts, trials, 1, trials)?;
+    let start = Instant::now();
+    let totals = pool.install(|| {
+        exp.distributions
+            .iter()
+            .map(|d| {
+                bar.set_message(d.label.clone());
+                let build = opts.build.unwrap_or(EstimatorSpec::build);
+                let mut total = BlockStats::empty(&empty_cells(exp, d), exp.estimators.len());
+                run_blocks(exp, d, trials, blocks.clone(), build, &bar, |b| {
+                    total.merge(&b)
+                })?;
+                Ok(total)
+            })
+            .collect::<Result<Vec<_>>>()
+    })?;
+    bar.finish_and_clear();
+    let dists = exp
+        .distributions
+        .iter()
+        .zip(totals)
+        .map(|(d, total)| dist_result(exp, d, trials, total))
+        .collect();
+    Ok(RunOutput {
+        trials,
+        threads: pool.current_num_threads(),
+        wall_s: start.elapsed().as_secs_f64(),
+        dists,
+    })
 }
+
+/// The thread pool and progress bar of a run, after checking its memory plan (`held_blocks`
+/// block statistics held at once per distribution).
+fn prepare(
+    exp: &Experiment,
+    opts: &RunOptions,
+    trials: u64,
+    held_blocks: u64,
+    bar_trials: u64,
+) -> Result<(rayon::ThreadPool, ProgressBar)> {
+    let threads = limits::threads(opts.threads)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| Error::param("threads", threads, e.to_string()))?;
+    check_memory(
+        exp,
+        trials,
+        held_blocks + WAVE_BLOCKS,
+        pool.current_num_threads(),
+        opts.memory,
+    )?;
+    let bar = if opts.progress {
+        let bar = ProgressBar::new(bar_trials * exp.distributions.len() as u64);
+        if let Ok(style) = ProgressStyle::with_template(
+            "{spinner} {msg:<18} [{bar:30}] {pos}/{len} trials ({eta} left)",
+        ) {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    Ok((pool, bar))
+}
+
+/// One distribution's results from its folded statistics, with what the law says about the
+/// mean's cells (seeded from the experiment's seed, the label and n, so it is reproducible).
+fn dist_result(exp: &Experiment, d: &Distribution, trials: u64, total: BlockStats) -> DistResult {
+    let runs_mean = exp.estimators.contains(&EstimatorSpec::Mean);
+    let mean_laws = exp
+        .file
+        .checkpoints
+        .par_iter()
+        .map(|&n| {
+            runs_mean.then(|| {
+                let seed = splitmix64(
+                    splitmix64(exp.file.seed ^ fnv1a(&d.label)) ^ splitmix64(n as u64 ^ LAW_STREAM),
+                );
+                MeanLaw::new(&d.dist, n, trials, seed)
+            })
+        })
+        .collect();
+    DistResult {
+        label: d.label.clone(),
+        law: d.dist.to_string(),
+        mu: d.dist.mean(),
+        variance: d.dist.variance(),
+        cells: total.cells,
+        estimator_nanos: total.estimator_nanos,
+        generate_nanos: total.generate_nanos,
+        samples: trials * exp.max_n() as u64,
+        state_bytes_max: total.state_bytes_max,
+        state_bytes_sum: total.state_bytes_sum,
+        mean_laws,
+    }
+}
+
+/// Salt of the streams that simulate the law's null, apart from every trial's stream.
+const LAW_STREAM: u64 = 0x6c61_775f_6e75_6c6c;
 
 /// Trial count of a run: the option if given, else the experiment's.
 fn trial_count(exp: &Experiment, opts: &RunOptions) -> Result<u64> {
@@ -240,31 +345,9 @@ fn trial_count(exp: &Experiment, opts: &RunOptions) -> Result<u64> {
 pub fn run_shard(exp: &Experiment, opts: &RunOptions, shard: Shard) -> Result<ShardOutput> {
     let trials = trial_count(exp, opts)?;
     let blocks = shard.blocks(trials.div_ceil(BLOCK_TRIALS));
-    let threads = limits::threads(opts.threads)?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::param("threads", threads, e.to_string()))?;
-    check_memory(
-        exp,
-        trials,
-        blocks.end - blocks.start,
-        pool.current_num_threads(),
-        opts.memory,
-    )?;
     let shard_trials =
         (blocks.end * BLOCK_TRIALS).min(trials) - (blocks.start * BLOCK_TRIALS).min(trials);
-    let bar = if opts.progress {
-        let bar = ProgressBar::new(shard_trials * exp.distributions.len() as u64);
-        if let Ok(style) = ProgressStyle::with_template(
-            "{spinner} {msg:<18} [{bar:30}] {pos}/{len} trials ({eta} left)",
-        ) {
-            bar.set_style(style.progress_chars("=> "));
-        }
-        bar
-    } else {
-        ProgressBar::hidden()
-    };
+    let (pool, bar) = prepare(exp, opts, trials, blocks.end - blocks.start, shard_trials)?;
     let start = Instant::now();
     let per_dist = pool.install(|| {
         exp.distributions
@@ -272,7 +355,9 @@ pub fn run_shard(exp: &Experiment, opts: &RunOptions, shard: Shard) -> Result<Sh
             .map(|d| {
                 bar.set_message(d.label.clone());
                 let build = opts.build.unwrap_or(EstimatorSpec::build);
-                run_blocks(exp, d, trials, blocks.clone(), build, &bar)
+                let mut out = Vec::with_capacity((blocks.end - blocks.start) as usize);
+                run_blocks(exp, d, trials, blocks.clone(), build, &bar, |b| out.push(b))?;
+                Ok(out)
             })
             .collect::<Result<Vec<_>>>()
     })?;
@@ -288,9 +373,10 @@ pub fn run_shard(exp: &Experiment, opts: &RunOptions, shard: Shard) -> Result<Sh
 }
 
 /// Refuses a run that would hold more than the memory limit, before anything is allocated.
-/// A shard keeps every block's statistics until the fold (that fixed merge tree is what makes
-/// shards merge into the same bits), so memory grows with the trial count; each worker also
-/// holds one trial's samples up to the largest checkpoint and one of each estimator. The
+/// A single run holds its running total and one wave of blocks per distribution; a shard keeps
+/// every block's statistics until the merge (that fixed merge tree is what makes shards merge
+/// into the same bits), so a shard's memory grows with its share of the trials. Each worker
+/// also holds one trial's samples up to the largest checkpoint and one of each estimator. The
 /// estimate is a lower bound: a histogram holds at least one bin per cell.
 fn check_memory(
     exp: &Experiment,
@@ -374,18 +460,7 @@ pub fn fold(exp: &Experiment, shards: &[ShardOutput]) -> Result<RunOutput> {
                 total.merge(b);
             }
         }
-        dists.push(DistResult {
-            label: d.label.clone(),
-            law: d.dist.to_string(),
-            mu: d.dist.mean(),
-            variance: d.dist.variance(),
-            cells: total.cells,
-            estimator_nanos: total.estimator_nanos,
-            generate_nanos: total.generate_nanos,
-            samples: trials * exp.max_n() as u64,
-            state_bytes_max: total.state_bytes_max,
-            state_bytes_sum: total.state_bytes_sum,
-        });
+        dists.push(dist_result(exp, d, trials, total));
     }
     Ok(RunOutput {
         trials,
@@ -400,14 +475,15 @@ fn empty_cells(exp: &Experiment, d: &Distribution) -> Vec<CellAccumulator> {
     let mut cells = Vec::new();
     for spec in &exp.estimators {
         for &n in &exp.file.checkpoints {
-            let threshold = checks::deviation_threshold(&exp.file.checks, spec, &d.dist, n);
+            let threshold = claims::deviation_threshold(&exp.file.checks, spec, &d.dist, n);
             cells.push(CellAccumulator::with_deviation_threshold(threshold));
         }
     }
     cells
 }
 
-/// The given blocks of one distribution, each folded chunk by chunk in chunk order.
+/// The given blocks of one distribution, each folded chunk by chunk in chunk order and handed
+/// to `sink` in block order.
 fn run_blocks(
     exp: &Experiment,
     d: &Distribution,
@@ -415,9 +491,9 @@ fn run_blocks(
     blocks: Range<u64>,
     build: BuildFn,
     bar: &ProgressBar,
-) -> Result<Vec<BlockStats>> {
+    mut sink: impl FnMut(BlockStats),
+) -> Result<()> {
     let template = empty_cells(exp, d);
-    let mut out = Vec::with_capacity((blocks.end - blocks.start) as usize);
     let mut wave = blocks.start;
     while wave < blocks.end {
         let wave_end = (wave + WAVE_BLOCKS).min(blocks.end);
@@ -438,11 +514,11 @@ fn run_blocks(
             for r in block {
                 stats.merge(r);
             }
-            out.push(stats);
+            sink(stats);
         }
         wave = wave_end;
     }
-    Ok(out)
+    Ok(())
 }
 
 fn run_chunk(

@@ -155,14 +155,16 @@ pub fn write_tables(
 ) -> Result<Vec<tables::Row>> {
     let mut rows = tables::rows(exp, out);
     write_atomic(&dir.join("results.csv"), &tables::results_csv(&rows)?)?;
+    let summary = tables::summary_md(exp, out, &rows, checks);
     let speed = tables::speed_rows(exp, out);
     write_atomic(&dir.join("speed.csv"), &tables::results_csv(&speed)?)?;
     // The generator's cost stays in speed.csv; the plots compare estimators only.
-    rows.extend(speed.into_iter().filter(|r| r.metric == "ns_per_sample"));
-    write_atomic(
-        &dir.join("summary.md"),
-        tables::summary_md(exp, out, checks).as_bytes(),
-    )?;
+    rows.extend(
+        speed
+            .into_iter()
+            .filter(|r| r.metric == crate::harness::metrics::Metric::NsPerSample),
+    );
+    write_atomic(&dir.join("summary.md"), summary.as_bytes())?;
     let checks_json = serde_json::to_string_pretty(checks).unwrap_or_default();
     write_atomic(&dir.join("checks.json"), checks_json.as_bytes())?;
     write_atomic(

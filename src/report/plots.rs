@@ -12,6 +12,7 @@
 //! panels, axes and marks; one renderer draws any figure on any plotters backend.
 
 use crate::error::{Error, Result};
+use crate::harness::metrics::Metric;
 use crate::report::tables::Row;
 use crate::report::write_atomic;
 use plotters::coord::Shift;
@@ -137,7 +138,7 @@ struct Data<'a> {
     dists: Vec<&'a str>,
     ests: Vec<&'a str>,
     /// Keyed by (distribution, estimator, metric), sorted by n.
-    series: HashMap<(String, String, String), Vec<Pt>>,
+    series: HashMap<(String, String, Metric), Vec<Pt>>,
 }
 
 impl<'a> Data<'a> {
@@ -160,11 +161,7 @@ impl<'a> Data<'a> {
                 _ => None,
             };
             series
-                .entry((
-                    r.distribution.clone(),
-                    r.estimator.clone(),
-                    r.metric.clone(),
-                ))
+                .entry((r.distribution.clone(), r.estimator.clone(), r.metric))
                 .or_default()
                 .push(Pt {
                     n: r.n as f64,
@@ -182,13 +179,13 @@ impl<'a> Data<'a> {
         }
     }
 
-    fn get(&self, dist: &str, est: &str, metric: &str) -> &[Pt] {
+    fn get(&self, dist: &str, est: &str, metric: Metric) -> &[Pt] {
         self.series
-            .get(&(dist.to_string(), est.to_string(), metric.to_string()))
+            .get(&(dist.to_string(), est.to_string(), metric))
             .map_or(&[], Vec::as_slice)
     }
 
-    fn has_metric(&self, metric: &str) -> bool {
+    fn has_metric(&self, metric: Metric) -> bool {
         self.series.keys().any(|k| k.2 == metric)
     }
 
@@ -207,7 +204,7 @@ impl<'a> Data<'a> {
     }
 
     /// Sorted distinct sample counts of a metric: the tick marks of an n axis.
-    fn ns(&self, metric: &str) -> Vec<f64> {
+    fn ns(&self, metric: Metric) -> Vec<f64> {
         let mut ns: Vec<f64> = self
             .series
             .iter()
@@ -231,7 +228,7 @@ impl<'a> Data<'a> {
 
     /// A note naming the series with values of zero or below in `metrics`, which a log axis
     /// cannot show.
-    fn zero_note(&self, metrics: &[&str]) -> Option<String> {
+    fn zero_note(&self, metrics: &[Metric]) -> Option<String> {
         let mut parts = Vec::new();
         for e in &self.ests {
             let dists: Vec<&str> = self
@@ -241,7 +238,7 @@ impl<'a> Data<'a> {
                 .filter(|d| {
                     metrics
                         .iter()
-                        .any(|m| self.get(d, e, m).iter().any(|p| p.v <= 0.0))
+                        .any(|&m| self.get(d, e, m).iter().any(|p| p.v <= 0.0))
                 })
                 .collect();
             if !dists.is_empty() {
@@ -259,7 +256,7 @@ impl<'a> Data<'a> {
 
     /// "mean on firefly, infinite-variance" for every series of `metric` that has values but
     /// lacks an interval at some n.
-    fn missing_ci(&self, metric: &str, ests: &[&str]) -> Option<String> {
+    fn missing_ci(&self, metric: Metric, ests: &[&str]) -> Option<String> {
         let mut by_est: Vec<(String, Vec<&str>)> = Vec::new();
         for e in ests {
             let dists: Vec<&str> = self
@@ -487,7 +484,7 @@ const BAND_LEGEND: &str = "shaded: 95% confidence interval";
 const DODGE: f64 = 0.045;
 
 /// Says where a figure draws no band because `results.csv` has no interval.
-fn ci_note(data: &Data, metric: &str, what: &str) -> Option<String> {
+fn ci_note(data: &Data, metric: Metric, what: &str) -> Option<String> {
     data.missing_ci(metric, &data.ests).map(|who| {
         format!(
             "No band for {who}: results.csv gives no interval there (on a law of infinite \
@@ -497,7 +494,7 @@ fn ci_note(data: &Data, metric: &str, what: &str) -> Option<String> {
 }
 
 /// A figure of one panel per distribution plotting `metric` against n for every estimator.
-fn per_distribution(data: &Data, metric: &str, y: Axis, bars: bool) -> Vec<Panel> {
+fn per_distribution(data: &Data, metric: Metric, y: Axis, bars: bool) -> Vec<Panel> {
     let x = Axis::n(&data.ns(metric));
     data.dists
         .iter()
@@ -535,7 +532,7 @@ fn with_band_legend(data: &Data) -> Vec<Legend> {
 
 /// The primary metric: median absolute relative error against n, log-log, with its interval.
 fn median_error(data: &Data) -> Option<Figure> {
-    const M: &str = "median_abs_rel_error";
+    const M: Metric = Metric::MedianAbsRelError;
     if !data.has_metric(M) {
         return None;
     }
@@ -560,7 +557,7 @@ fn median_error(data: &Data) -> Option<Figure> {
 
 /// Signed bias against n on a linear axis, with a zero line.
 fn bias(data: &Data) -> Option<Figure> {
-    const M: &str = "bias";
+    const M: Metric = Metric::Bias;
     if !data.has_metric(M) {
         return None;
     }
@@ -596,24 +593,14 @@ fn bias(data: &Data) -> Option<Figure> {
 
 /// Variance and MSE side by side for each distribution, log-log, with a 1/n reference.
 fn variance_mse(data: &Data) -> Option<Figure> {
-    if !data.has_metric("variance") && !data.has_metric("mse") {
+    if !data.has_metric(Metric::Variance) && !data.has_metric(Metric::Mse) {
         return None;
     }
-    let x = Axis::n(&data.ns("variance"));
-    // The 1/n line runs through the first point of the mean (or of the first estimator that
-    // has one): an estimator whose curve stays parallel converges at the Monte Carlo rate.
-    let anchor_est = |d: &str, metric: &str| -> Option<Pt> {
-        let mut order = vec!["mean"];
-        order.extend(data.ests.iter().copied());
-        order
-            .into_iter()
-            .filter_map(|e| data.get(d, e, metric).first().copied())
-            .find(|p| p.v > 0.0)
-    };
+    let x = Axis::n(&data.ns(Metric::Variance));
     let mut panels = Vec::new();
     for d in &data.dists {
         let mut pair = Vec::new();
-        for (metric, name) in [("variance", "variance"), ("mse", "MSE")] {
+        for (metric, name) in [(Metric::Variance, "variance"), (Metric::Mse, "MSE")] {
             let mut marks = Vec::new();
             for e in &data.ests {
                 marks.extend(series_marks(
@@ -622,10 +609,16 @@ fn variance_mse(data: &Data) -> Option<Figure> {
                     Spread::Band,
                 ));
             }
-            let ns = data.ns(metric);
-            if let (Some(p), Some(&last)) = (anchor_est(d, metric), ns.last()) {
+            // The mean's exact variance sigma^2 / n (also its exact MSE): a curve parallel to
+            // it converges at the Monte Carlo rate.
+            let exact: Vec<(f64, f64)> = data
+                .get(d, "mean", Metric::ExactVariance)
+                .iter()
+                .map(|p| (p.n, p.v))
+                .collect();
+            if exact.len() >= 2 {
                 marks.push(Mark::Line {
-                    pts: vec![(p.n, p.v), (last, p.v * p.n / last)],
+                    pts: exact,
                     colour: REF_GREY,
                     width: 2,
                     dashed: true,
@@ -649,7 +642,7 @@ fn variance_mse(data: &Data) -> Option<Figure> {
     }
     let mut legend = with_band_legend(data);
     legend.push(Legend {
-        label: "∝ 1/n through the mean's first point".into(),
+        label: "σ²/n: the mean's exact variance (from the law)".into(),
         colour: REF_GREY,
         kind: LegendKind::Dashed,
     });
@@ -663,8 +656,8 @@ fn variance_mse(data: &Data) -> Option<Figure> {
          lowest point."
             .to_string(),
     );
-    notes.extend(data.zero_note(&["variance", "mse"]));
-    notes.extend(ci_note(data, "variance", "variance"));
+    notes.extend(data.zero_note(&[Metric::Variance, Metric::Mse]));
+    notes.extend(ci_note(data, Metric::Variance, "variance"));
     let k = data.dists.len();
     Some(Figure {
         name: "variance_mse",
@@ -679,7 +672,7 @@ fn variance_mse(data: &Data) -> Option<Figure> {
 
 /// Firefly rate against n, linear from zero, with Wilson intervals.
 fn firefly_rate(data: &Data) -> Option<Figure> {
-    const M: &str = "firefly_rate";
+    const M: Metric = Metric::FireflyRate;
     if !data.has_metric(M) {
         return None;
     }
@@ -723,11 +716,17 @@ fn firefly_rate(data: &Data) -> Option<Figure> {
 
 /// Quantile fans of |X − μ|/μ: one row per distribution, one column per estimator.
 fn error_quantiles(data: &Data) -> Option<Figure> {
-    let q = |k: &str| format!("rel_error_q{k}");
-    if !data.has_metric(&q("50")) {
+    let q = |k: &str| match k {
+        "05" => Metric::RelErrorQ05,
+        "25" => Metric::RelErrorQ25,
+        "75" => Metric::RelErrorQ75,
+        "95" => Metric::RelErrorQ95,
+        _ => Metric::RelErrorQ50,
+    };
+    if !data.has_metric(q("50")) {
         return None;
     }
-    let x = Axis::n(&data.ns(&q("50")));
+    let x = Axis::n(&data.ns(q("50")));
     let mut panels = Vec::new();
     for d in &data.dists {
         let mut row = Vec::new();
@@ -735,7 +734,7 @@ fn error_quantiles(data: &Data) -> Option<Figure> {
             let colour = data.colour(e);
             let mut marks = Vec::new();
             for (lo, hi, alpha) in [("05", "95", 0.16), ("25", "75", 0.38)] {
-                let (l, h) = (data.get(d, e, &q(lo)), data.get(d, e, &q(hi)));
+                let (l, h) = (data.get(d, e, q(lo)), data.get(d, e, q(hi)));
                 let pairs: Vec<(f64, f64, f64)> = l
                     .iter()
                     .filter_map(|a| h.iter().find(|b| b.n == a.n).map(|b| (a.n, a.v, b.v)))
@@ -751,7 +750,7 @@ fn error_quantiles(data: &Data) -> Option<Figure> {
                 }
             }
             if *e != "mean" {
-                let mean_median = data.get(d, "mean", &q("50"));
+                let mean_median = data.get(d, "mean", q("50"));
                 if !mean_median.is_empty() {
                     marks.push(Mark::Line {
                         pts: mean_median.iter().map(|p| (p.n, p.v)).collect(),
@@ -763,11 +762,7 @@ fn error_quantiles(data: &Data) -> Option<Figure> {
                 }
             }
             marks.push(Mark::Line {
-                pts: data
-                    .get(d, e, &q("50"))
-                    .iter()
-                    .map(|p| (p.n, p.v))
-                    .collect(),
+                pts: data.get(d, e, q("50")).iter().map(|p| (p.n, p.v)).collect(),
                 colour,
                 width: 2,
                 dashed: false,
@@ -835,17 +830,17 @@ fn error_quantiles(data: &Data) -> Option<Figure> {
 
 /// Time per sample against relative RMSE at the largest n: one labelled point per estimator.
 fn speed_vs_error(data: &Data) -> Option<Figure> {
-    if !data.has_metric("ns_per_sample") || !data.has_metric("relative_rmse") {
+    if !data.has_metric(Metric::NsPerSample) || !data.has_metric(Metric::RelativeRmse) {
         return None;
     }
-    let n_max = data.ns("relative_rmse").last().copied()?;
+    let n_max = data.ns(Metric::RelativeRmse).last().copied()?;
     let mut panels = Vec::new();
     for d in &data.dists {
         let mut marks = Vec::new();
         for e in &data.ests {
-            let speed = data.get(d, e, "ns_per_sample").last().copied();
+            let speed = data.get(d, e, Metric::NsPerSample).last().copied();
             let err = data
-                .get(d, e, "relative_rmse")
+                .get(d, e, Metric::RelativeRmse)
                 .iter()
                 .find(|p| p.n == n_max)
                 .copied();
@@ -875,7 +870,7 @@ fn speed_vs_error(data: &Data) -> Option<Figure> {
         "Lower left is better: faster and more accurate. Time per sample as measured in the run; relative RMSE = \
          √MSE / μ at n = {n_max}, bar: 95% interval."
     )];
-    if let Some(who) = data.missing_ci("relative_rmse", &data.ests) {
+    if let Some(who) = data.missing_ci(Metric::RelativeRmse, &data.ests) {
         notes.push(format!(
             "No bar for {who}: results.csv gives no interval there (on a law of infinite \
              variance no RMSE interval is meaningful)."

@@ -2,92 +2,101 @@
 //! metric), the readable `summary.md`, and `manifest.json` with what produced them.
 
 use crate::error::{Error, Num, Result};
-use crate::harness::metrics::{CellMetrics, Interval};
+use crate::estimators::EstimatorSpec;
+use crate::harness::law;
+use crate::harness::metrics::{Caveat, Interval, LEVEL, Metric};
 use crate::harness::{CheckResult, Experiment, RunOutput};
 use serde::Serialize;
+use std::collections::HashMap;
 use std::fmt::Write as _;
 
 pub use crate::harness::metrics::Row;
 
-/// Whether an estimator is the plain mean on a law of infinite variance, where variance and
-/// MSE intervals mean nothing.
-fn infinite_variance(spec: &crate::estimators::EstimatorSpec, variance: Option<f64>) -> bool {
-    matches!(spec, crate::estimators::EstimatorSpec::Mean) && variance.is_none()
-}
-
 /// Every metric of every cell, plus state sizes at the largest n. Nothing here depends on
 /// timing or thread count, so a run's `results.csv` is byte-identical however it was split.
+///
+/// The plain mean's bias interval comes from the law's null of its grand mean, and its exact
+/// variance `sigma^2 / n` is a row of its own. A metric whose truth is infinite is written as
+/// `inf` (`-inf` for a difference against the mean) with no interval; a tail-dominated one keeps
+/// the run's value but no interval, and its caveat says why.
 pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
     let cps = &exp.file.checkpoints;
     let mut rows = Vec::new();
     for d in &out.dists {
+        let infinite_variance = d.variance.is_none();
         for (e, spec) in exp.estimators.iter().enumerate() {
-            let unbounded = infinite_variance(spec, d.variance);
+            let is_mean = *spec == EstimatorSpec::Mean;
             for (i, &n) in cps.iter().enumerate() {
-                let Some(m) = d.cells[e * cps.len() + i].metrics(d.mu) else {
+                let Some(mut m) = d.cells[e * cps.len() + i].metrics(d.mu) else {
                     continue;
                 };
-                let mut push = |metric: &str, iv: Interval, drop_ci: bool| {
+                let mean_law = if is_mean {
+                    d.mean_laws[i].as_ref()
+                } else {
+                    None
+                };
+                if let Some(l) = mean_law {
+                    m.bias = l.bias_interval(m.bias, d.mu);
+                }
+                let mut push = |metric: Metric, iv: Interval| {
+                    let caveat = law::caveat(metric, &m, mean_law, infinite_variance);
+                    let value = match caveat {
+                        Some(Caveat::InfiniteTruth) if metric == Metric::PairedMseVsMean => {
+                            f64::NEG_INFINITY
+                        }
+                        Some(Caveat::InfiniteTruth) => f64::INFINITY,
+                        _ => iv.value,
+                    };
+                    let held = caveat.is_none();
+                    let interval = held && iv.low.is_some() && iv.high.is_some();
                     rows.push(Row {
                         distribution: d.label.clone(),
                         estimator: spec.to_string(),
                         n,
-                        metric: metric.to_string(),
-                        value: iv.value,
-                        ci_low: if drop_ci { None } else { iv.low },
-                        ci_high: if drop_ci { None } else { iv.high },
+                        metric,
+                        value,
+                        ci_low: if interval { iv.low } else { None },
+                        ci_high: if interval { iv.high } else { None },
+                        se: if held { iv.se } else { None },
+                        level: interval.then_some(LEVEL),
+                        caveat,
                     });
                 };
-                push("bias", m.bias, unbounded);
-                let rel = |x: Option<f64>| x.map(|v| v / d.mu);
-                push(
-                    "relative_bias",
-                    Interval {
-                        value: m.bias.value / d.mu,
-                        low: rel(m.bias.low),
-                        high: rel(m.bias.high),
-                    },
-                    unbounded,
-                );
-                push("variance", m.variance, unbounded);
-                push("mse", m.mse, unbounded);
-                push("relative_rmse", m.relative_rmse, unbounded);
-                push("median_abs_rel_error", m.median_abs_rel_error, false);
-                push("mean_abs_rel_error", m.mean_abs_rel_error, false);
-                for (q, v) in m.rel_error_quantiles {
-                    push(
-                        &format!("rel_error_q{:02}", (q * 100.0).round()),
-                        Interval::bare(v),
-                        false,
-                    );
+                let relative = |iv: Interval| iv.map(|v| v / d.mu, iv.se.map(|s| s / d.mu));
+                push(Metric::Bias, m.bias);
+                push(Metric::RelativeBias, relative(m.bias));
+                push(Metric::Variance, m.variance);
+                if let Some(l) = mean_law {
+                    let exact = l
+                        .relative_variance
+                        .map_or(f64::INFINITY, |v| v * d.mu * d.mu);
+                    push(Metric::ExactVariance, Interval::bare(exact));
                 }
-                push("firefly_rate", m.firefly_rate, false);
+                push(Metric::Mse, m.mse);
+                push(Metric::RelativeRmse, m.relative_rmse);
+                push(Metric::MedianAbsRelError, m.median_abs_rel_error);
+                push(Metric::MeanAbsRelError, m.mean_abs_rel_error);
+                for (metric, v) in m.rel_error_quantiles {
+                    push(metric, Interval::bare(v));
+                }
+                push(Metric::FireflyRate, m.firefly_rate);
                 push(
-                    "outlier_trials",
+                    Metric::OutlierTrials,
                     Interval::bare(m.outlier_trials as f64),
-                    false,
                 );
                 if let Some(r) = m.rejection_rate {
-                    push("rejection_rate", r, false);
+                    push(Metric::RejectionRate, r);
                 }
-                push("paired_abs_rel_vs_mean", m.paired_abs_rel_vs_mean, false);
-                push("paired_mse_vs_mean", m.paired_mse_vs_mean, unbounded);
+                push(Metric::PairedAbsRelVsMean, m.paired_abs_rel_vs_mean);
+                push(Metric::PairedMseVsMean, m.paired_mse_vs_mean);
             }
             let n = exp.max_n();
-            let mut push_bare = |metric: &str, value: f64| {
-                rows.push(Row {
-                    distribution: d.label.clone(),
-                    estimator: spec.to_string(),
-                    n,
-                    metric: metric.to_string(),
-                    value,
-                    ci_low: None,
-                    ci_high: None,
-                });
+            let mut push_bare = |metric: Metric, value: f64| {
+                rows.push(bare_row(&d.label, spec.to_string(), n, metric, value));
             };
-            push_bare("state_bytes_max", d.state_bytes_max[e] as f64);
+            push_bare(Metric::StateBytesMax, d.state_bytes_max[e] as f64);
             push_bare(
-                "state_bytes_mean",
+                Metric::StateBytesMean,
                 d.state_bytes_sum[e] as f64 / out.trials as f64,
             );
         }
@@ -95,19 +104,29 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
     rows
 }
 
+/// A row with a value only.
+fn bare_row(distribution: &str, estimator: String, n: usize, metric: Metric, value: f64) -> Row {
+    Row {
+        distribution: distribution.to_string(),
+        estimator,
+        n,
+        metric,
+        value,
+        ci_low: None,
+        ci_high: None,
+        se: None,
+        level: None,
+        caveat: None,
+    }
+}
+
 /// Measured costs at the largest n (`speed.csv`): per estimator `ns_per_sample` (push and
 /// estimate, one thread), and per distribution `generate_ns_per_sample` under the estimator
 /// name `(generator)`.
 pub fn speed_rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
     let n = exp.max_n();
-    let row = |d: &str, estimator: String, metric: &str, value: f64| Row {
-        distribution: d.to_string(),
-        estimator,
-        n,
-        metric: metric.to_string(),
-        value,
-        ci_low: None,
-        ci_high: None,
+    let row = |d: &str, estimator: String, metric: Metric, value: f64| {
+        bare_row(d, estimator, n, metric, value)
     };
     let mut rows = Vec::new();
     for d in &out.dists {
@@ -115,14 +134,14 @@ pub fn speed_rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
             rows.push(row(
                 &d.label,
                 spec.to_string(),
-                "ns_per_sample",
+                Metric::NsPerSample,
                 d.ns_per_sample(e),
             ));
         }
         rows.push(row(
             &d.label,
             "(generator)".to_string(),
-            "generate_ns_per_sample",
+            Metric::GenerateNsPerSample,
             d.generate_ns_per_sample(),
         ));
     }
@@ -161,29 +180,43 @@ pub fn read_results_csv(path: &std::path::Path) -> Result<Vec<Row>> {
         .collect()
 }
 
-fn fmt_ci(iv: &Interval) -> String {
-    match (iv.low, iv.high) {
-        (Some(l), Some(h)) => format!("{:.3e} [{:.3e}, {:.3e}]", iv.value, l, h),
-        _ => format!("{:.3e}", iv.value),
-    }
-}
-
-fn pct(iv: &Interval) -> String {
-    match (iv.low, iv.high) {
-        (Some(l), Some(h)) => format!(
-            "{:.2}% [{:.2}, {:.2}]",
-            100.0 * iv.value,
-            100.0 * l,
-            100.0 * h
-        ),
-        _ => format!("{:.2}%", 100.0 * iv.value),
+/// A row as the summary prints it: value, interval, or the caveat that replaces it.
+fn fmt_row(r: Option<&Row>, scale: f64, unit: &str) -> String {
+    let Some(r) = r else {
+        return "–".into();
+    };
+    let v = |x: f64| {
+        if x.is_infinite() {
+            if x > 0.0 { "inf".into() } else { "-inf".into() }
+        } else {
+            format!("{:.3e}{unit}", x * scale)
+        }
+    };
+    match (r.ci_low, r.ci_high, r.caveat) {
+        (_, _, Some(c)) => format!("{} ({})", v(r.value), c.label()),
+        (Some(l), Some(h), None) => format!("{} [{}, {}]", v(r.value), v(l), v(h)),
+        _ => v(r.value),
     }
 }
 
 /// `summary.md`: per distribution, every estimator at the largest n; then every check.
-pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> String {
+pub fn summary_md(
+    exp: &Experiment,
+    out: &RunOutput,
+    rows: &[Row],
+    checks: &[CheckResult],
+) -> String {
     let cps = &exp.file.checkpoints;
-    let last = cps.len() - 1;
+    let last = *cps.last().expect("checked non-empty");
+    let index: HashMap<(&str, &str, usize, Metric), &Row> = rows
+        .iter()
+        .map(|r| {
+            (
+                (r.distribution.as_str(), r.estimator.as_str(), r.n, r.metric),
+                r,
+            )
+        })
+        .collect();
     let mut s = String::new();
     let _ = writeln!(s, "# {}\n", exp.name);
     if !exp.file.description.is_empty() {
@@ -201,15 +234,28 @@ pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> 
     );
     let _ = writeln!(
         s,
-        "Primary metric: median absolute relative error with its order-statistic 95% interval \
-         (quantiles from a log histogram, exact to 2.3%). Intervals are 95%. `paired` is the \
-         mean over trials of this estimator's absolute relative error minus the mean's on the \
-         same samples (negative: better than the mean). Variance, MSE and relative-RMSE \
-         intervals are normal-theory and assume the estimate has a finite fourth moment; where \
-         it does not (the mean on a tail of shape < 4) they are unreliable, and where the \
-         variance itself is infinite they are omitted. No bootstrap is run: the runner keeps no \
-         per-trial values, so that a million trials cost the memory of a thousand.\n"
+        "Primary metric: median absolute relative error; its 95% interval runs between the \
+         edges of the histogram bins holding the order statistics that bound it (bins 2.3% \
+         wide; an error of exactly 0 or 1 is exact). The plain mean's bias interval comes from \
+         the law's own null of its grand mean (normal body, simulated rare tail), so it holds on \
+         heavy tails; other bias intervals are normal-theory. Variance and MSE intervals are \
+         scaled chi-square (never below 0) with a fourth-moment standard error. \
+         **tail-dominated**: more than half of the metric's spread comes from events the run \
+         expects fewer than {} times (by the law, for the mean; by the run's own {} largest \
+         errors, for every estimator): the value is what this run saw and no interval is given. \
+         **inf**: the true value is infinite. `paired` is the mean over trials of this \
+         estimator's absolute relative error minus the mean's on the same samples (negative: \
+         better than the mean).\n",
+        crate::harness::metrics::TAIL_EVENTS,
+        crate::harness::metrics::TAIL_EVENTS
     );
+    if !exp.warnings.is_empty() {
+        let _ = writeln!(s, "**Checks that cannot run:**\n");
+        for w in &exp.warnings {
+            let _ = writeln!(s, "- {w}");
+        }
+        let _ = writeln!(s);
+    }
     for d in &out.dists {
         let var = d
             .variance
@@ -224,37 +270,35 @@ pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> 
         );
         let _ = writeln!(
             s,
-            "At n = {} samples per pixel:\n\n| estimator | median abs rel error | bias | relative RMSE | firefly rate | rejection rate | paired vs mean | ns/sample | state bytes |\n|---|---|---|---|---|---|---|---|---|",
-            cps[last]
+            "At n = {last} samples per pixel:\n\n| estimator | median abs rel error | bias | relative RMSE | firefly rate | rejection rate | paired vs mean | ns/sample | state bytes |\n|---|---|---|---|---|---|---|---|---|"
         );
         for (e, spec) in exp.estimators.iter().enumerate() {
-            let Some(m): Option<CellMetrics> = d.cells[e * cps.len() + last].metrics(d.mu) else {
+            let est = spec.to_string();
+            let get = |m: Metric| {
+                index
+                    .get(&(d.label.as_str(), est.as_str(), last, m))
+                    .copied()
+            };
+            if get(Metric::Bias).is_none() {
                 continue;
+            }
+            let rejection = match get(Metric::RejectionRate) {
+                Some(r) => format!(
+                    "{} of {}",
+                    fmt_row(Some(r), 100.0, "%"),
+                    get(Metric::OutlierTrials).map_or(0.0, |o| o.value)
+                ),
+                None => "– (0 outlier trials)".to_string(),
             };
-            let unbounded = infinite_variance(spec, d.variance);
-            let (bias, rmse) = if unbounded {
-                (
-                    format!("{:.3e} (no CI: infinite variance)", m.bias.value),
-                    format!("{:.3e} (no CI: infinite variance)", m.relative_rmse.value),
-                )
-            } else {
-                (fmt_ci(&m.bias), fmt_ci(&m.relative_rmse))
-            };
-            let rejection = m
-                .rejection_rate
-                .map_or("– (0 outlier trials)".to_string(), |r| {
-                    format!("{} of {}", pct(&r), m.outlier_trials)
-                });
             let _ = writeln!(
                 s,
-                "| `{}` | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
-                spec,
-                fmt_ci(&m.median_abs_rel_error),
-                bias,
-                rmse,
-                pct(&m.firefly_rate),
+                "| `{spec}` | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
+                fmt_row(get(Metric::MedianAbsRelError), 1.0, ""),
+                fmt_row(get(Metric::Bias), 1.0, ""),
+                fmt_row(get(Metric::RelativeRmse), 1.0, ""),
+                fmt_row(get(Metric::FireflyRate), 100.0, "%"),
                 rejection,
-                fmt_ci(&m.paired_abs_rel_vs_mean),
+                fmt_row(get(Metric::PairedAbsRelVsMean), 1.0, ""),
                 d.ns_per_sample(e),
                 d.state_bytes_max[e]
             );
@@ -280,14 +324,14 @@ pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> 
     );
     let _ = writeln!(
         s,
-        "| verdict | check | distribution | estimator | n | claim | observed | p | Holm level |\n|---|---|---|---|---|---|---|---|---|"
+        "| verdict | check | distribution | estimator | n | claim | observed | p | Holm level | catches |\n|---|---|---|---|---|---|---|---|---|---|"
     );
     let mut sorted: Vec<&CheckResult> = checks.iter().collect();
     sorted.sort_by_key(|c| c.passed);
     for c in sorted {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | `{}` | {} | {} | {} | {:.3e} | {} |",
+            "| {} | {} | {} | `{}` | {} | {} | {} | {:.3e} | {} | {} |",
             match (c.passed, c.gating) {
                 (true, _) => "pass",
                 (false, true) => "**FAIL**",
@@ -300,7 +344,8 @@ pub fn summary_md(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) -> 
             c.claim,
             c.observed,
             c.p_value,
-            c.holm_alpha.map_or("–".to_string(), |a| format!("{a:.2e}"))
+            c.holm_alpha.map_or("–".to_string(), |a| format!("{a:.2e}")),
+            c.detects.as_deref().unwrap_or("–")
         );
     }
     s
