@@ -21,5 +21,5 @@ pub fn run(args: &MergeArgs) -> Result<ExitCode> {
     let (exp, out) = shards::merge(&files)?;
     fireflies::report::prepare_report_dir(&args.out)?;
     eprintln!("merged {} shards of {}", files.len(), exp.name);
-    super::run::report_run(&args.out, &exp, &out)
+    super::run::report_run(&args.out, &exp, &out, true)
 }

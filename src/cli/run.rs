@@ -30,6 +30,9 @@ pub struct RunArgs {
     /// `DIR/shard-i-of-k.json`; `fireflies merge` combines the shards into the report.
     #[arg(long, value_name = "i/k")]
     shard: Option<String>,
+    /// Write the tables only, no figures (for runs repeated over many seeds).
+    #[arg(long)]
+    no_plots: bool,
 }
 
 pub fn run(args: &RunArgs, memory: MemoryLimit) -> Result<ExitCode> {
@@ -60,6 +63,9 @@ pub fn run(args: &RunArgs, memory: MemoryLimit) -> Result<ExitCode> {
         opts.trials.unwrap_or(exp.file.trials),
         exp.max_n()
     );
+    for w in &exp.warnings {
+        eprintln!("warning: {w}");
+    }
     if let Some(text) = &args.shard {
         let shard = Shard::parse(text)?;
         let output = runner::run_shard(&exp, &opts, shard)?;
@@ -71,7 +77,7 @@ pub fn run(args: &RunArgs, memory: MemoryLimit) -> Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let out = harness::run(&exp, &opts)?;
-    report_run(&dir, &exp, &out)
+    report_run(&dir, &exp, &out, !args.no_plots)
 }
 
 /// The experiment at `path` (or the embedded default), with its seed optionally replaced.
@@ -88,9 +94,14 @@ pub fn load(path: Option<&std::path::Path>, seed: Option<u64>) -> Result<Experim
 
 /// Checks, tables and plots of a finished run, replacing the report at `dir` as a unit; exit
 /// code 1 when a gating check failed.
-pub fn report_run(dir: &std::path::Path, exp: &Experiment, out: &RunOutput) -> Result<ExitCode> {
+pub fn report_run(
+    dir: &std::path::Path,
+    exp: &Experiment,
+    out: &RunOutput,
+    with_plots: bool,
+) -> Result<ExitCode> {
     let checks = harness::checks::evaluate(exp, out);
-    report::write_report(dir, exp, out, &checks, true)?;
+    report::write_report(dir, exp, out, &checks, with_plots)?;
     let failed: Vec<_> = checks.iter().filter(|c| !c.passed).collect();
     let fails_run = checks.iter().any(|c| c.fails_run());
     eprintln!(

@@ -376,6 +376,8 @@ pub struct Manifest<'a> {
     pub wall_s: f64,
     /// Samples drawn per wall-clock second (each fed to every estimator).
     pub samples_per_s: f64,
+    /// Largest resident memory of the process so far, bytes (Linux; `None` elsewhere).
+    pub peak_rss_bytes: Option<u64>,
     /// Checks run and failed.
     pub checks: usize,
     /// Checks failed.
@@ -406,6 +408,7 @@ pub fn manifest_json(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) 
         threads: out.threads,
         wall_s: out.wall_s,
         samples_per_s: out.samples_per_s(),
+        peak_rss_bytes: crate::limits::peak_rss_bytes(),
         checks: checks.len(),
         checks_failed: checks.iter().filter(|c| !c.passed).count(),
     };
