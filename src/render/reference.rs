@@ -91,10 +91,10 @@ impl PixelStats {
         self.count += 1;
         let n = self.count as f64;
         let v = [rgb[0], rgb[1], rgb[2], luminance(rgb)];
-        for c in 0..CHANNELS {
-            let d = v[c] - self.mean[c];
-            self.mean[c] += d / n;
-            self.m2[c] += d * (v[c] - self.mean[c]);
+        for ((x, mean), m2) in v.into_iter().zip(&mut self.mean).zip(&mut self.m2) {
+            let d = x - *mean;
+            *mean += d / n;
+            *m2 += d * (x - *mean);
         }
     }
 
