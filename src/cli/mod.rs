@@ -1,8 +1,10 @@
 //! Subcommands of the `fireflies` binary; each lives in its own module.
 
+mod compare;
 mod eval;
 mod gate;
 mod merge;
+mod reference;
 mod render;
 mod run;
 
@@ -36,6 +38,10 @@ enum Command {
     Merge(merge::MergeArgs),
     /// Path-trace a Mitsuba 3 scene into per-pixel estimator banks.
     Render(render::RenderArgs),
+    /// Trace a converged reference (the mean at high spp, resumable) with its standard error.
+    Reference(reference::ReferenceArgs),
+    /// Image metrics (RMSE, relMSE, PSNR, SSIM, bias, fireflies) of an EXR against a reference.
+    Compare(compare::CompareArgs),
 }
 
 /// Runs the chosen subcommand; `Err` exits with status 2.
@@ -47,6 +53,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Merge(args)) => merge::run(&args),
         Some(Command::Gate(args)) => gate::run(&args, memory),
         Some(Command::Render(args)) => render::run(&args, memory),
+        Some(Command::Reference(args)) => reference::run(&args, memory),
+        Some(Command::Compare(args)) => compare::run(&args),
         None => run::run(&run::RunArgs::default(), memory),
     }
 }

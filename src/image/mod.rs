@@ -1,6 +1,8 @@
 //! RGB images: the film's output, read back for comparisons. EXR holds linear floats; PNG is a
-//! tone-mapped preview for people. Both are written atomically.
+//! tone-mapped preview for people. Both are written atomically. [`metrics`] compares an image
+//! with a reference.
 
+pub mod metrics;
 pub mod read;
 
 use crate::atomic::write_atomic;

@@ -1,6 +1,7 @@
 //! A reference path tracer for the subset of Mitsuba 3 scenes this project needs.
 //!
-//! Layers, top to bottom: [`film`] (per-pixel estimator banks) and [`integrator`] (unidirectional
+//! Layers, top to bottom: [`film`] (per-pixel estimator banks), [`reference`] (converged means
+//! with their standard errors) and [`integrator`] (unidirectional
 //! path tracing with next-event estimation and MIS) over [`world`] (the built scene: [`bvh`],
 //! [`camera`], and the plugins) over [`scene`] (plain description, produced by [`mitsuba`] from
 //! XML) and [`sampling`] (warps and frames).
@@ -16,6 +17,7 @@ pub mod emitters;
 pub mod film;
 pub mod integrator;
 pub mod mitsuba;
+pub mod reference;
 pub mod sampler;
 pub mod sampling;
 pub mod scene;
