@@ -145,7 +145,7 @@ trials = 64
 checkpoints = [3]
 estimators = ["mean"]
 [[distributions]]
-dist = {{ kind = "point", value = {value} }}
+dist = {{ kind = "point-mass", value = {value} }}
 [checks]
 mon_delta = 0
 zirr_bound = false
@@ -162,7 +162,7 @@ trials = 64
 checkpoints = [3]
 estimators = ["mean"]
 [[distributions]]
-dist = { kind = "point", value = 0 }
+dist = { kind = "point-mass", value = 0.0 }
 "#,
         "zero.toml",
         "zero",

@@ -170,14 +170,6 @@ impl LogNormal {
         self.sf(t)
     }
 
-    /// A draw of `S` given `S >= t`, by inverting the normal survival function on the part of
-    /// it above `t` (accurate however far out `t` is).
-    pub fn sample_from<R: Rng + ?Sized>(&self, t: f64, rng: &mut R) -> f64 {
-        let p = self.mass_from(t) * (1.0 - unit_f64(rng));
-        let z = -norm_inv_cdf(p);
-        (self.mu + self.sigma * z).exp().max(t)
-    }
-
     /// `ln E[(S / c)^k] = k (mu - ln c) + k^2 sigma^2 / 2`.
     pub fn ln_moment(&self, k: f64, c: f64) -> f64 {
         k * (self.mu - c.ln()) + 0.5 * k * k * self.sigma * self.sigma
@@ -197,6 +189,35 @@ impl LogNormal {
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
         let z: f64 = StandardNormal.sample(rng);
         (self.mu + self.sigma * z).exp()
+    }
+}
+
+/// The lognormal law conditioned on `S >= t`, for drawing only its rare part: inverting the
+/// normal survival function on the mass above `t`, accurate however far out `t` is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LogNormalAbove {
+    mu: f64,
+    sigma: f64,
+    from: f64,
+    mass: f64,
+}
+
+impl LogNormalAbove {
+    /// `law` given `S >= from`.
+    pub fn new(law: &LogNormal, from: f64) -> Self {
+        LogNormalAbove {
+            mu: law.mu,
+            sigma: law.sigma,
+            from,
+            mass: law.mass_from(from),
+        }
+    }
+
+    /// One draw.
+    pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        let p = self.mass * (1.0 - unit_f64(rng));
+        let z = -norm_inv_cdf(p);
+        (self.mu + self.sigma * z).exp().max(self.from)
     }
 }
 

@@ -213,26 +213,6 @@ impl Mixture {
         self.weighted(|d| d.mass_from(t))
     }
 
-    /// A draw of `S` given `S >= t`: a component chosen with probability proportional to
-    /// `w_i P_i(S >= t)`, then a draw from its own part above `t`.
-    pub fn sample_from<R: Rng + ?Sized>(&self, t: f64, rng: &mut R) -> f64 {
-        let masses: Vec<f64> = self
-            .weights
-            .iter()
-            .zip(&self.components)
-            .map(|(w, d)| w * d.mass_from(t))
-            .collect();
-        let mut u = unit_f64(rng) * masses.iter().sum::<f64>();
-        for (m, d) in masses.iter().zip(&self.components) {
-            if u < *m {
-                return d.sample_from(t, rng);
-            }
-            u -= m;
-        }
-        let last = masses.iter().rposition(|&m| m > 0.0).unwrap_or(0);
-        self.components[last].sample_from(t, rng)
-    }
-
     /// `ln E[(S / c)^k]`, combined in log space.
     pub fn ln_moment(&self, k: f64, c: f64) -> f64 {
         ln_weighted_sum(self.parts(k, c).map(|(lw, _)| lw))

@@ -27,7 +27,7 @@ mod presets;
 mod spec;
 pub(crate) mod special;
 
-pub use lognormal::LogNormal;
+pub use lognormal::{LogNormal, LogNormalAbove};
 pub use mixture::Mixture;
 pub use pareto::{Pareto, TruncatedPareto};
 pub use point::PointMass;
@@ -174,15 +174,31 @@ impl Dist {
         dispatch!(self, d => d.mass_from(t))
     }
 
-    /// A draw of `S` given `S >= t` (needs `mass_from(t) > 0`), for simulating only the rare
-    /// part of a law.
-    pub fn sample_from<R: Rng + ?Sized>(&self, t: f64, rng: &mut R) -> f64 {
+    /// The law conditioned on `S >= t` (needs `mass_from(t) > 0`), for simulating only the
+    /// rare part of a law: each law's own tail (a Pareto is memoryless in `ln S`, so its tail
+    /// is a Pareto from `t`), built once and drawn from many times.
+    pub fn above(&self, t: f64) -> Above {
         match self {
-            Dist::PointMass(d) => d.value(),
-            Dist::Pareto(d) => d.sample_from(t, rng),
-            Dist::TruncatedPareto(d) => d.sample_from(t, rng),
-            Dist::LogNormal(d) => d.sample_from(t, rng),
-            Dist::Mixture(d) => d.sample_from(t, rng),
+            Dist::PointMass(d) => Above::Point(d.value()),
+            Dist::Pareto(d) => Pareto::new(t.max(d.scale()), d.shape())
+                .map_or(Above::Point(t), |p| Above::Law(Box::new(p.into()))),
+            Dist::TruncatedPareto(d) => {
+                TruncatedPareto::new(t.max(d.scale()), d.shape(), d.upper())
+                    .map_or(Above::Point(d.upper()), |p| Above::Law(Box::new(p.into())))
+            }
+            Dist::LogNormal(d) => Above::LogNormal(LogNormalAbove::new(d, t)),
+            Dist::Mixture(m) => {
+                let mut total = 0.0;
+                let mut parts = Vec::new();
+                for (&w, d) in m.weights().iter().zip(m.components()) {
+                    let mass = w * d.mass_from(t);
+                    if mass > 0.0 {
+                        total += mass;
+                        parts.push((total, d.above(t)));
+                    }
+                }
+                Above::Mixture(parts)
+            }
         }
     }
 
@@ -243,6 +259,39 @@ impl Dist {
                 *x = d.sample(rng);
             }
         })
+    }
+}
+
+/// A law conditioned on `S >= t`: see [`Dist::above`].
+#[derive(Clone, Debug)]
+pub enum Above {
+    /// Everything above `t` is one value.
+    Point(f64),
+    /// A law of its own (a Pareto or truncated Pareto starting at `t`).
+    Law(Box<Dist>),
+    /// A lognormal's tail.
+    LogNormal(LogNormalAbove),
+    /// Components with their cumulative masses above `t` (not normalised).
+    Mixture(Vec<(f64, Above)>),
+}
+
+impl Above {
+    /// One draw of `S` given `S >= t`.
+    pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        match self {
+            Above::Point(v) => *v,
+            Above::Law(d) => d.sample(rng),
+            Above::LogNormal(d) => d.sample(rng),
+            Above::Mixture(parts) => {
+                let total = parts.last().map_or(0.0, |p| p.0);
+                let u = special::unit_f64(rng) * total;
+                let i = parts
+                    .iter()
+                    .position(|p| u < p.0)
+                    .unwrap_or(parts.len() - 1);
+                parts[i].1.sample(rng)
+            }
+        }
     }
 }
 

@@ -129,13 +129,6 @@ impl Pareto {
         self.sf(t)
     }
 
-    /// A draw of `S` given `S >= t`: the law is memoryless in `ln S`, so it is this Pareto
-    /// with its scale moved up to `t`.
-    pub fn sample_from<R: Rng + ?Sized>(&self, t: f64, rng: &mut R) -> f64 {
-        let e: f64 = Exp1.sample(rng);
-        t.max(self.scale) * (e * self.inv_shape).exp()
-    }
-
     /// `ln E[(S / c)^k]`: `ln(shape / (shape - k)) + k ln(scale / c)`, infinite for
     /// `k >= shape`.
     pub fn ln_moment(&self, k: f64, c: f64) -> f64 {
@@ -315,15 +308,6 @@ impl TruncatedPareto {
     /// `P(S >= t)` (continuous: the same as [`TruncatedPareto::sf`]).
     pub fn mass_from(&self, t: f64) -> f64 {
         self.sf(t)
-    }
-
-    /// A draw of `S` given `S >= t`: the same law with its scale moved up to `t`, by the
-    /// inverse transform.
-    pub fn sample_from<R: Rng + ?Sized>(&self, t: f64, rng: &mut R) -> f64 {
-        let from = t.clamp(self.scale, self.upper);
-        let mass = -(-self.shape * log_ratio(self.upper, from)).exp_m1();
-        let y = -(-mass * unit_f64(rng)).ln_1p() * self.inv_shape;
-        (from * y.exp()).min(self.upper)
     }
 
     /// `∫ x^(k - shape - 1) dx` over `[a, b]` in units of `scale`, times `shape`: the
