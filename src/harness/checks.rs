@@ -19,9 +19,9 @@
 //! The Chebyshev and median-of-means bounds hold for every law, so on a given law they are
 //! loose: each such check states the smallest exceedance rate it would catch ([`CheckResult::detects`]).
 //! A NaN p-value fails its check. Checks the configuration asks for but the experiment cannot
-//! run are listed by [`unreachable`].
+//! run are listed by [`super::claims::unreachable`].
 
-use super::claims::{CheckKind, ChecksConfig, ROUNDING_TOLERANCE, mon_sets};
+use super::claims::{CheckKind, ROUNDING_TOLERANCE};
 use super::experiment::Experiment;
 use super::runner::RunOutput;
 use crate::estimators::EstimatorSpec;
@@ -61,52 +61,6 @@ impl CheckResult {
     pub fn fails_run(&self) -> bool {
         !self.passed && self.gating
     }
-}
-
-/// Checks the configuration asks for that cannot run on this experiment, in words naming the
-/// estimator or setting; printed before a run and listed in the summary.
-pub fn unreachable(
-    cfg: &ChecksConfig,
-    estimators: &[EstimatorSpec],
-    checkpoints: &[usize],
-) -> Vec<String> {
-    let mut out = Vec::new();
-    if cfg.mon_delta > 0.0 {
-        let m = mon_sets(cfg.mon_delta);
-        let mons: Vec<usize> = estimators
-            .iter()
-            .filter_map(|s| match s {
-                EstimatorSpec::Mon { m } => Some(*m),
-                _ => None,
-            })
-            .collect();
-        if mons.is_empty() {
-            // Nothing to check: the bound is about median-of-means estimators only.
-        } else if !mons.contains(&m) {
-            out.push(format!(
-                "checks.mon_delta = {} needs mon:M={m} (M = ceil(8 ln(1/delta))), which the \
-                 experiment does not run (it runs {}): the median-of-means bound is not checked",
-                cfg.mon_delta,
-                mons.iter()
-                    .map(|m| format!("mon:M={m}"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ));
-        } else {
-            let below: Vec<String> = checkpoints
-                .iter()
-                .filter(|&&n| n < m)
-                .map(|n| n.to_string())
-                .collect();
-            if !below.is_empty() {
-                out.push(format!(
-                    "the median-of-means bound needs n >= M = {m}: not checked at n = {}",
-                    below.join(", ")
-                ));
-            }
-        }
-    }
-    out
 }
 
 fn normal_sf(z: f64) -> f64 {

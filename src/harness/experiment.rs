@@ -289,7 +289,7 @@ impl Experiment {
             .clone()
             .unwrap_or_else(|| default_name.to_string());
         check_name(&name)?;
-        let warnings = super::checks::unreachable(&file.checks, &estimators, &file.checkpoints);
+        let warnings = super::claims::unreachable(&file.checks, &estimators, &file.checkpoints);
         Ok(Experiment {
             name,
             file,

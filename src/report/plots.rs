@@ -487,8 +487,9 @@ const DODGE: f64 = 0.045;
 fn ci_note(data: &Data, metric: Metric, what: &str) -> Option<String> {
     data.missing_ci(metric, &data.ests).map(|who| {
         format!(
-            "No band for {who}: results.csv gives no interval there (on a law of infinite \
-             variance no {what} interval is meaningful)."
+            "No band for {who}: results.csv gives no {what} interval there (its caveat \
+             column says why: the spread rests on events seen fewer than 10 times, or the true \
+             value is infinite)."
         )
     })
 }
@@ -872,8 +873,8 @@ fn speed_vs_error(data: &Data) -> Option<Figure> {
     )];
     if let Some(who) = data.missing_ci(Metric::RelativeRmse, &data.ests) {
         notes.push(format!(
-            "No bar for {who}: results.csv gives no interval there (on a law of infinite \
-             variance no RMSE interval is meaningful)."
+            "No bar for {who}: results.csv gives no interval there (its caveat column says \
+             why: tail-dominated, or an infinite true value)."
         ));
     }
     Some(Figure {
