@@ -217,15 +217,17 @@ impl MeanLaw {
 }
 
 /// Which of a cell's metrics the law or the run says cannot carry an interval: infinite truths
-/// first, then tail-dominance (law-based for the mean, the run's own top errors for every
-/// estimator). `law` is the mean's, given only for the plain mean's cells.
+/// first, then tail-dominance (law-based for the plain mean, and for every estimator's paired
+/// differences against it; the run's own most extreme trials for every estimator). `law` is
+/// what the law says about the plain mean at this n (`None` when the experiment does not run
+/// it); `is_mean` says whether this cell is the plain mean's.
 pub fn caveat(
     metric: Metric,
     cell: &CellMetrics,
     law: Option<&MeanLaw>,
+    is_mean: bool,
     infinite_law_variance: bool,
 ) -> Option<Caveat> {
-    let is_mean = law.is_some();
     match metric {
         Metric::Variance | Metric::Mse | Metric::RelativeRmse | Metric::ExactVariance
             if is_mean && infinite_law_variance =>
@@ -237,19 +239,32 @@ pub fn caveat(
         }
         _ => {}
     }
-    let power = match metric {
-        // The mean's bias interval comes from the law's own null: it holds on any tail.
-        Metric::Bias | Metric::RelativeBias if is_mean => return None,
+    let top = &cell.top_share;
+    let law_share = |power: usize| law.map_or(0.0, |l| l.dominance[power]);
+    // (the law's share that applies, the run's top share) behind each metric.
+    let (law, run) = match metric {
+        // The mean's bias interval comes from the law's own null: it holds on any tail; its
+        // paired differences against itself are exactly 0.
         Metric::Bias
         | Metric::RelativeBias
-        | Metric::MeanAbsRelError
         | Metric::PairedAbsRelVsMean
-        | Metric::PairedMseVsMean => 0,
-        Metric::Variance | Metric::Mse | Metric::RelativeRmse => 1,
+        | Metric::PairedMseVsMean
+            if is_mean =>
+        {
+            return None;
+        }
+        Metric::Bias | Metric::RelativeBias => (0.0, top.deviation[0]),
+        Metric::Variance => (if is_mean { law_share(1) } else { 0.0 }, top.deviation[1]),
+        Metric::Mse | Metric::RelativeRmse => {
+            (if is_mean { law_share(1) } else { 0.0 }, top.error[1])
+        }
+        Metric::MeanAbsRelError => (if is_mean { law_share(0) } else { 0.0 }, top.error[0]),
+        // A difference against the mean carries the mean's own rare errors.
+        Metric::PairedAbsRelVsMean => (law_share(0), top.paired[0]),
+        Metric::PairedMseVsMean => (law_share(1), top.paired[1]),
         _ => return None,
     };
-    let law_share = law.map_or(0.0, |l| l.dominance[power]);
-    (law_share > DOMINANCE || cell.top_share[power] > DOMINANCE).then_some(Caveat::TailDominated)
+    (law > DOMINANCE || run > DOMINANCE).then_some(Caveat::TailDominated)
 }
 
 #[cfg(test)]

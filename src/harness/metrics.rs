@@ -263,29 +263,30 @@ impl LogHistogram {
         self.order_statistic(rank)
     }
 
-    /// The share of `sum x^power` that the `k` largest values carry, each of them taken at its
-    /// bin's upper edge and the rest at their centres (so the share errs high): whether a
-    /// moment of this run rests on a handful of observations.
-    pub fn top_share(&self, k: u64, power: i32) -> f64 {
-        // (upper edge, centre, count), largest first; the atom 1 sits just below bin 0.
-        let above = self.bins.range(0..).rev();
-        let below = self.bins.range(..0).rev();
-        let bin = |(&b, &c): (&i32, &u64)| {
+    /// The share of `sum |x - centre|^power` that the `k` values farthest from `centre`
+    /// carry, each of them taken at its bin's far edge and the rest at their bins' centres (so
+    /// the share errs high); 1 when every value sits at `centre` (the run saw no spread at
+    /// all). Whether a moment of this run rests on a handful of observations.
+    pub fn top_share(&self, centre: f64, k: u64, power: i32) -> f64 {
+        // (farthest deviation, typical deviation, count) of every atom and bin.
+        let mut groups: Vec<(f64, f64, u64)> = vec![
+            ((0.0 - centre).abs(), (0.0 - centre).abs(), self.zeros),
+            ((1.0 - centre).abs(), (1.0 - centre).abs(), self.ones),
+        ];
+        for (&b, &c) in &self.bins {
             let (lo, hi) = (bin_edge(b), bin_edge(b + 1));
-            (hi, (lo * hi).sqrt(), c)
-        };
-        let groups = above
-            .map(bin)
-            .chain(std::iter::once((1.0, 1.0, self.ones)))
-            .chain(below.map(bin));
+            let far = (lo - centre).abs().max((hi - centre).abs());
+            groups.push((far, ((lo * hi).sqrt() - centre).abs(), c));
+        }
+        groups.sort_by(|a, b| b.0.total_cmp(&a.0));
         let (mut top, mut total, mut left) = (0.0, 0.0, k);
-        for (high, centre, count) in groups {
+        for (far, typical, count) in groups {
             let taken = count.min(left);
             left -= taken;
-            top += taken as f64 * high.powi(power);
-            total += taken as f64 * high.powi(power) + (count - taken) as f64 * centre.powi(power);
+            top += taken as f64 * far.powi(power);
+            total += taken as f64 * far.powi(power) + (count - taken) as f64 * typical.powi(power);
         }
-        if total > 0.0 { top / total } else { 0.0 }
+        if total > 0.0 { top / total } else { 1.0 }
     }
 }
 
@@ -600,6 +601,14 @@ pub struct CellAccumulator {
     squared_error: Moments,
     abs_rel_error: Moments,
     abs_rel_hist: LogHistogram,
+    /// The relative estimates `X / mu` themselves, for how much of their spread a few trials
+    /// carry.
+    #[serde(default)]
+    estimate_hist: LogHistogram,
+    /// `|paired differences|` (absolute error, squared error) against the mean, for how much
+    /// of their spread a few trials carry.
+    #[serde(default)]
+    paired_hists: [LogHistogram; 2],
     /// Paired difference of absolute relative error against the mean on the same trial.
     paired_abs_rel: Moments,
     /// Paired difference of squared error against the mean on the same trial.
@@ -672,6 +681,9 @@ impl CellAccumulator {
         self.squared_error.push(err * err);
         self.abs_rel_error.push(rel);
         self.abs_rel_hist.push(rel);
+        self.estimate_hist.push(x);
+        self.paired_hists[0].push((rel - mean_err.abs()).abs());
+        self.paired_hists[1].push((err * err - mean_err * mean_err).abs());
         self.paired_abs_rel.push(rel - mean_err.abs());
         self.paired_squared.push(err * err - mean_err * mean_err);
         let firefly = o.estimate > (1.0 + tau) * mu;
@@ -692,6 +704,10 @@ impl CellAccumulator {
         self.squared_error.merge(&b.squared_error);
         self.abs_rel_error.merge(&b.abs_rel_error);
         self.abs_rel_hist.merge(&b.abs_rel_hist);
+        self.estimate_hist.merge(&b.estimate_hist);
+        for (a, b) in self.paired_hists.iter_mut().zip(&b.paired_hists) {
+            a.merge(b);
+        }
         self.paired_abs_rel.merge(&b.paired_abs_rel);
         self.paired_squared.merge(&b.paired_squared);
         self.fireflies += b.fireflies;
@@ -774,10 +790,16 @@ impl CellAccumulator {
                 self.paired_squared.mean() * mu2,
                 self.paired_squared.standard_error() * mu2,
             ),
-            top_share: [
-                h.top_share(TAIL_EVENTS as u64, 2),
-                h.top_share(TAIL_EVENTS as u64, 4),
-            ],
+            top_share: {
+                let k = TAIL_EVENTS as u64;
+                let (x, e) = (&self.estimate_hist, h);
+                let centre = self.estimate.mean();
+                TopShares {
+                    deviation: [x.top_share(centre, k, 2), x.top_share(centre, k, 4)],
+                    error: [e.top_share(0.0, k, 2), e.top_share(0.0, k, 4)],
+                    paired: self.paired_hists.each_ref().map(|h| h.top_share(0.0, k, 2)),
+                }
+            },
         })
     }
 }
@@ -811,9 +833,21 @@ pub struct CellMetrics {
     pub paired_abs_rel_vs_mean: Interval,
     /// Mean over trials of `(X - mu)^2 - (mean - mu)^2` (negative: better than the mean).
     pub paired_mse_vs_mean: Interval,
-    /// The share of `sum |X - mu|^2` and of `sum |X - mu|^4` that the [`TAIL_EVENTS`] largest
-    /// errors of the run carry: above 1/2, the run's spread rests on a handful of trials.
-    pub top_share: [f64; 2],
+    /// How much of the run's spread its [`TAIL_EVENTS`] most extreme trials carry.
+    pub top_share: TopShares,
+}
+
+/// Shares of a cell's second and fourth moments carried by its [`TAIL_EVENTS`] most extreme
+/// trials: above 1/2, the run's spread rests on a handful of trials (or, at 1, on none).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct TopShares {
+    /// Of `sum (X - mean X)^2` and `sum (X - mean X)^4`: behind bias and variance.
+    pub deviation: [f64; 2],
+    /// Of `sum |X - mu|^2` and `sum |X - mu|^4`: behind MSE and the mean absolute error.
+    pub error: [f64; 2],
+    /// Of `sum d^2` for the paired differences `d` against the mean (absolute error, squared
+    /// error), taken around 0: a difference that is 0 but in a few trials rests on those.
+    pub paired: [f64; 2],
 }
 
 #[cfg(test)]
@@ -945,10 +979,16 @@ mod tests {
             h.push(0.1);
         }
         // Ten errors of 0.1 among a thousand: about 1% of the squares.
-        assert!(h.top_share(10, 2) < 0.011, "{}", h.top_share(10, 2));
+        assert!(
+            h.top_share(0.0, 10, 2) < 0.011,
+            "{}",
+            h.top_share(0.0, 10, 2)
+        );
+        // No spread at all around 0.1: nothing to estimate a spread from.
+        assert!(h.top_share(0.1, 10, 2) > 0.99);
         h.push(100.0);
         // One error of 100 carries nearly all of sum e^2 = 10 + 10^4.
-        assert!(h.top_share(10, 2) > 0.99);
+        assert!(h.top_share(0.0, 10, 2) > 0.99);
     }
 
     #[test]

@@ -30,16 +30,12 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
                 let Some(mut m) = d.cells[e * cps.len() + i].metrics(d.mu) else {
                     continue;
                 };
-                let mean_law = if is_mean {
-                    d.mean_laws[i].as_ref()
-                } else {
-                    None
-                };
-                if let Some(l) = mean_law {
+                let mean_law = d.mean_laws[i].as_ref();
+                if let (true, Some(l)) = (is_mean, mean_law) {
                     m.bias = l.bias_interval(m.bias, d.mu);
                 }
                 let mut push = |metric: Metric, iv: Interval| {
-                    let caveat = law::caveat(metric, &m, mean_law, infinite_variance);
+                    let caveat = law::caveat(metric, &m, mean_law, is_mean, infinite_variance);
                     let value = match caveat {
                         Some(Caveat::InfiniteTruth) if metric == Metric::PairedMseVsMean => {
                             f64::NEG_INFINITY
@@ -66,7 +62,7 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
                 push(Metric::Bias, m.bias);
                 push(Metric::RelativeBias, relative(m.bias));
                 push(Metric::Variance, m.variance);
-                if let Some(l) = mean_law {
+                if let (true, Some(l)) = (is_mean, mean_law) {
                     let exact = l
                         .relative_variance
                         .map_or(f64::INFINITY, |v| v * d.mu * d.mu);
