@@ -4,7 +4,7 @@
 
 use super::eval::Input;
 use clap::Args;
-use fireflies::dist::fit::{Atom, Component, Fit, Role, fit};
+use fireflies::dist::fit::{Component, Detail, Fit, Role, fit};
 use fireflies::report::qq::write_tail_qq;
 use fireflies::{Error, Result};
 use serde_json::{Map, Value, json};
@@ -97,12 +97,11 @@ fn report(f: &Fit, label: &str) -> Result<Value> {
         .components
         .iter()
         .find(|c| c.role == Role::Zero)
-        .map_or(0, |c| c.count);
-    let mut atoms = f.atoms.iter();
+        .map_or(0.0, |c| c.count);
     let components: Vec<Value> = f
         .components
         .iter()
-        .map(|c| component(f, c, n, &mut atoms))
+        .map(|c| component(c, n))
         .collect::<Result<_>>()?;
     let tail = f.tail.map(|t| {
         let h = t.choice.hill;
@@ -117,6 +116,7 @@ fn report(f: &Fit, label: &str) -> Result<Value> {
         o.insert("loglik_needed".into(), json!(t.loglik_needed));
         o.insert("kept".into(), json!(t.fitted.is_some()));
         if let Some(tf) = t.fitted {
+            o.insert("outliers".into(), json!(tf.outliers));
             o.insert(
                 "mean_rule".into(),
                 serde_json::to_value(tf.rule).unwrap_or_default(),
@@ -138,7 +138,7 @@ fn report(f: &Fit, label: &str) -> Result<Value> {
         (mean - f.stream_mean) / f.stream_mean
     };
     o.insert("mean_rel_error".into(), json!(rel));
-    o.insert("zero_fraction".into(), json!(zeros as f64 / n));
+    o.insert("zero_fraction".into(), json!(zeros / n));
     o.insert("components".into(), Value::Array(components));
     o.insert("tail".into(), tail.unwrap_or(Value::Null));
     o.insert("ks_log".into(), json!(f.ks_log));
@@ -198,46 +198,42 @@ fn inline(v: &Value) -> String {
 }
 
 /// One component: role, weight, count, then the law's `kind` and parameters as an experiment
-/// file spells them, then what the fit adds (the body's `mu_mle` and the part's sample mean).
-fn component<'a>(
-    f: &Fit,
-    c: &Component,
-    n: f64,
-    atoms: &mut impl Iterator<Item = &'a Atom>,
-) -> Result<Value> {
+/// file spells them, then what the fit adds (an atom's sample mean and range, a body part's
+/// unconstrained `mu_mle`, `sigma_mle` and sample mean, the tail's sample mean and Hill shape).
+fn component(c: &Component, n: f64) -> Result<Value> {
     let mut o = Map::new();
     o.insert(
         "role".into(),
         serde_json::to_value(c.role).unwrap_or_default(),
     );
-    o.insert("weight".into(), json!(c.count as f64 / n));
-    o.insert("count".into(), json!(c.count));
+    o.insert("weight".into(), json!(c.count / n));
+    // Whole counts print as integers; body parts share samples by responsibility.
+    if c.count.fract() == 0.0 {
+        o.insert("count".into(), json!(c.count as u64));
+    } else {
+        o.insert("count".into(), json!(c.count));
+    }
     let law = serde_json::to_value(&c.law)
         .map_err(|e| Error::param("spec", e.to_string(), "cannot be written as JSON"))?;
     if let Value::Object(fields) = law {
         o.extend(fields);
     }
-    match c.role {
-        Role::Body => {
-            if let Some(b) = f.body {
-                o.insert("mu_mle".into(), json!(b.mu_mle));
-                o.insert("sigma_mle".into(), json!(b.sigma_mle));
-                o.insert("sample_mean".into(), json!(b.mean));
-            }
+    match c.detail {
+        Detail::Atom(a) => {
+            o.insert("sample_mean".into(), json!(a.mean));
+            o.insert("low".into(), json!(a.low));
+            o.insert("high".into(), json!(a.high));
         }
-        Role::Tail => {
-            if let Some(tf) = f.tail.and_then(|t| t.fitted) {
-                o.insert("sample_mean".into(), json!(tf.mean));
-                o.insert("hill".into(), json!(tf.hill.shape));
-            }
+        Detail::Body(b) => {
+            o.insert("mu_mle".into(), json!(b.mu_mle));
+            o.insert("sigma_mle".into(), json!(b.sigma_mle));
+            o.insert("sample_mean".into(), json!(b.sample_mean));
         }
-        Role::Atom => {
-            if let Some(a) = atoms.next() {
-                o.insert("low".into(), json!(a.low));
-                o.insert("high".into(), json!(a.high));
-            }
+        Detail::Tail(t) => {
+            o.insert("sample_mean".into(), json!(t.mean));
+            o.insert("hill".into(), json!(t.hill.shape));
         }
-        Role::Zero | Role::Outlier => {}
+        Detail::None => {}
     }
     Ok(Value::Object(o))
 }

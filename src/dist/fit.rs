@@ -63,6 +63,14 @@ use crate::error::{Error, Result};
 pub const ATOM_MIN_COUNT: usize = 3;
 /// ... and in at least this fraction of the stream.
 pub const ATOM_MIN_FRACTION: f64 = 1e-4;
+/// The most lognormal parts of the body (see [`fit_body`]).
+pub const MAX_BODY_PARTS: usize = 4;
+/// The most iterations of expectation-maximisation for the body.
+pub const EM_MAX_ITER: usize = 500;
+/// The smallest variance of a body part's logs (a spread of 0.1%).
+pub const EM_VAR_FLOOR: f64 = 1e-6;
+/// The most samples EM runs on; longer bodies are thinned to evenly spaced order statistics.
+pub const EM_MAX_SAMPLES: usize = 20_000;
 /// Relative width of a cluster of nearly equal values: `[x, x (1 + NEAR_WIDTH)]`.
 pub const NEAR_WIDTH: f64 = 1e-4;
 /// A cluster of nearly equal values must hold at least this fraction of the stream.
@@ -180,11 +188,14 @@ pub struct TailChoice {
 }
 
 /// The candidate tail sizes for `m` continuous samples: every `k` from [`TAIL_MIN_K`] to
-/// [`DENSE_K`], then a geometric grid, up to `m - BODY_MIN_N`.
+/// [`DENSE_K`], then a geometric grid, up to half the samples (a tail is the minority above
+/// the body: on a multimodal stream the KS rule would otherwise take a Pareto across modes)
+/// and leaving [`BODY_MIN_N`].
 fn candidate_ks(m: usize) -> Vec<usize> {
     let Some(k_max) = m.checked_sub(BODY_MIN_N) else {
         return Vec::new();
     };
+    let k_max = k_max.min(m / 2);
     let mut ks: Vec<usize> = (TAIL_MIN_K..=k_max.min(DENSE_K)).collect();
     let mut k = DENSE_K as f64;
     loop {
@@ -225,11 +236,14 @@ pub fn choose_tail(desc: &[f64]) -> Option<TailChoice> {
 }
 
 /// A point mass of the fit: a value repeated exactly, or a cluster of nearly equal values
-/// (see the module docs), placed at the cluster's mean.
+/// (see the module docs), placed at the cluster's most frequent value.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Atom {
-    /// Where the point mass sits: the value, or the cluster's mean.
+    /// Where the point mass sits: the value, or the cluster's most frequent value (see
+    /// [`fit`] for where the difference from the cluster's mean goes).
     pub value: f64,
+    /// The mean of the samples it stands for.
+    pub mean: f64,
     /// Samples it stands for.
     pub count: usize,
     /// The smallest and largest of them (equal for an exact repeat).
@@ -290,34 +304,44 @@ pub fn find_atoms(asc: &[f64], n: usize) -> (Vec<Atom>, Vec<f64>) {
     (atoms, rest)
 }
 
-/// The atom standing for `xs` (increasing, not empty): at their value when all are equal,
-/// else at their mean, so that it carries their mean exactly.
+/// The atom standing for `xs` (increasing, not empty): at their most frequent value (the
+/// smallest of equals), with their mean kept beside it.
 fn atom_of(xs: &[f64]) -> Atom {
     let (low, high) = (xs[0], xs[xs.len() - 1]);
+    let (mut mode, mut best, mut i) = (low, 0, 0);
+    while i < xs.len() {
+        let j = i + xs[i..].partition_point(|&x| x == xs[i]);
+        if j - i > best {
+            (mode, best) = (xs[i], j - i);
+        }
+        i = j;
+    }
     Atom {
-        value: if low == high { low } else { mean_of(xs) },
+        value: mode,
+        mean: if low == high { low } else { mean_of(xs) },
         count: xs.len(),
         low,
         high,
     }
 }
 
-/// The lognormal body: the maximum-likelihood lognormal among those whose mean is the body
-/// samples' mean (see [`mean_constrained`]).
+/// One lognormal part of the body (see [`fit_body`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Body {
-    /// Samples in the body.
-    pub count: usize,
+    /// Body samples it stands for: the sum of their responsibilities.
+    pub count: f64,
     /// Location used in the generator; `exp(mu + sigma^2 / 2)` is `mean`.
     pub mu: f64,
     /// Spread used in the generator.
     pub sigma: f64,
-    /// The unconstrained maximum-likelihood location (mean of the logs), for comparison.
+    /// The mixture fit's location (the responsibility-weighted mean of the logs).
     pub mu_mle: f64,
-    /// The unconstrained maximum-likelihood spread of the logs, for comparison.
+    /// The mixture fit's spread (the responsibility-weighted spread of the logs).
     pub sigma_mle: f64,
-    /// The body samples' mean.
+    /// The generator's mean: `sample_mean`, plus the atoms' offsets for the heaviest part.
     pub mean: f64,
+    /// The responsibility-weighted mean of the samples.
+    pub sample_mean: f64,
 }
 
 /// How the tail's upper end (and, if need be, its shape) was set so that the tail
@@ -393,10 +417,26 @@ pub enum Role {
 pub struct Component {
     /// What it stands for.
     pub role: Role,
-    /// Samples it accounts for; its weight is `count / n`.
-    pub count: usize,
+    /// Samples it stands for, its weight being `count / n`: whole, except for lognormal body
+    /// parts, which share the body samples by their responsibilities.
+    pub count: f64,
     /// Its law.
     pub law: DistSpec,
+    /// What the fit knows about it beyond its law.
+    pub detail: Detail,
+}
+
+/// How a component was fitted, where there is more to say than its law.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Detail {
+    /// Nothing more: the zero mass, an outlier, or a body part whose samples are all equal.
+    None,
+    /// A point mass for repeated values.
+    Atom(Atom),
+    /// A lognormal body part.
+    Body(Body),
+    /// The Pareto tail.
+    Tail(TailFit),
 }
 
 /// A generator fitted to a stream, with what it was fitted from.
@@ -406,13 +446,9 @@ pub struct Fit {
     pub n: usize,
     /// The stream's mean.
     pub stream_mean: f64,
-    /// The components, in mixture order: zero, atoms (increasing value), body, tail, outliers
-    /// (decreasing value).
+    /// The components, in mixture order: zero, atoms (increasing value), body parts
+    /// (increasing), tail, outliers (decreasing value).
     pub components: Vec<Component>,
-    /// The atoms, in the order of their components.
-    pub atoms: Vec<Atom>,
-    /// The lognormal body, if any.
-    pub body: Option<Body>,
     /// The tail search, when there were enough continuous samples for one.
     pub tail: Option<Tail>,
     /// The fitted generator.
@@ -427,6 +463,28 @@ impl Fit {
     /// relative metrics are undefined.
     pub fn is_black(&self) -> bool {
         self.stream_mean == 0.0
+    }
+
+    /// The lognormal body parts (one, or two when the body splits).
+    pub fn bodies(&self) -> Vec<Body> {
+        self.components
+            .iter()
+            .filter_map(|c| match c.detail {
+                Detail::Body(b) => Some(b),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The point masses for repeated values.
+    pub fn atoms(&self) -> Vec<Atom> {
+        self.components
+            .iter()
+            .filter_map(|c| match c.detail {
+                Detail::Atom(a) => Some(a),
+                _ => None,
+            })
+            .collect()
     }
 
     /// The fitted generator's exact mean.
@@ -505,7 +563,7 @@ fn spec_of(components: &[Component], n: usize) -> DistSpec {
         components: components
             .iter()
             .map(|c| ComponentSpec {
-                weight: c.count as f64 / n as f64,
+                weight: c.count / n as f64,
                 dist: c.law.clone(),
             })
             .collect(),
@@ -620,15 +678,14 @@ pub fn fit(samples: &[f64]) -> Result<Fit> {
     if zeros == n {
         let components = vec![Component {
             role: Role::Zero,
-            count: n,
+            count: n as f64,
             law: DistSpec::PointMass { value: 0.0 },
+            detail: Detail::None,
         }];
         return Ok(Fit {
             n,
             stream_mean,
             components,
-            atoms: Vec::new(),
-            body: None,
             tail: None,
             dist: PointMass::ZERO.into(),
             ks_log: 0.0,
@@ -642,18 +699,36 @@ pub fn fit(samples: &[f64]) -> Result<Fit> {
     if zeros > 0 {
         components.push(Component {
             role: Role::Zero,
-            count: zeros,
+            count: zeros as f64,
             law: DistSpec::PointMass { value: 0.0 },
+            detail: Detail::None,
         });
     }
     for a in &atoms {
         components.push(Component {
             role: Role::Atom,
-            count: a.count,
+            count: a.count as f64,
             law: DistSpec::PointMass { value: a.value },
+            detail: Detail::Atom(*a),
         });
     }
-    let (body, tail) = fit_continuous(&continuous, &mut components)?;
+    // A cluster's atom sits on its most frequent value, where its samples are, rather than
+    // between them at their mean (which would cost the KS distance the cluster's whole weight
+    // for a shift of 1e-4); the body's mean takes up the difference. Without a lognormal body
+    // the atoms move to their means instead.
+    let excess: f64 = atoms
+        .iter()
+        .map(|a| a.count as f64 * (a.mean - a.value))
+        .sum();
+    let (tail, absorbed) = fit_continuous(&continuous, &mut components, excess)?;
+    if !absorbed {
+        for c in &mut components {
+            if let Detail::Atom(a) = &mut c.detail {
+                a.value = a.mean;
+                c.law = DistSpec::PointMass { value: a.mean };
+            }
+        }
+    }
     let spec = spec_of(&components, n);
     let dist = spec.build()?;
     let ks_log = ks_distance(&dist, &asc);
@@ -661,8 +736,6 @@ pub fn fit(samples: &[f64]) -> Result<Fit> {
         n,
         stream_mean,
         components,
-        atoms,
-        body,
         tail,
         dist,
         ks_log,
@@ -670,24 +743,27 @@ pub fn fit(samples: &[f64]) -> Result<Fit> {
 }
 
 /// Fits the body and tail to the continuous samples `asc` (increasing), appending their
-/// components.
+/// components. The largest lognormal body part's mean carries `excess` beyond its samples'
+/// sum (the atoms' offsets from their means); the flag says whether it could.
 fn fit_continuous(
     asc: &[f64],
     components: &mut Vec<Component>,
-) -> Result<(Option<Body>, Option<Tail>)> {
+    excess: f64,
+) -> Result<(Option<Tail>, bool)> {
     let m = asc.len();
     if m == 0 {
-        return Ok((None, None));
+        return Ok((None, false));
     }
-    let (mu_all, sigma_all) = log_moments(asc);
+    let (_, sigma_all) = log_moments(asc);
     if !(sigma_all > 0.0) {
         // All equal (too few to be an atom): a point mass.
         components.push(Component {
             role: Role::Body,
-            count: m,
+            count: m as f64,
             law: DistSpec::PointMass { value: asc[0] },
+            detail: Detail::None,
         });
-        return Ok((None, None));
+        return Ok((None, false));
     }
     let desc: Vec<f64> = asc.iter().rev().copied().collect();
     let mut tail = None;
@@ -695,14 +771,12 @@ fn fit_continuous(
     let mut split = m;
     if let Some(choice) = choose_tail(&desc) {
         let k = choice.hill.k;
-        let body = &asc[..m - k];
-        let (mu_b, sigma_b) = log_moments(body);
-        let gain = if sigma_b > 0.0 {
-            loglik_gain(m, k, sigma_all, mu_b, sigma_b, &choice.hill)
-        } else {
-            f64::NEG_INFINITY
-        };
-        let needed = (m as f64).ln();
+        let (gain, needed) = tail_gain(
+            &one_lognormal(asc),
+            &one_lognormal(&asc[..m - k]),
+            m,
+            &choice.hill,
+        );
         let fitted = if gain > needed {
             split = m - k;
             let (fitted, peeled) = fit_tail(&desc[..k], choice.hill.threshold);
@@ -718,78 +792,369 @@ fn fit_continuous(
             fitted,
         });
     }
-    let body_samples = &asc[..split];
-    let (mu_mle, sigma_mle) = if split == m {
-        (mu_all, sigma_all)
-    } else {
-        log_moments(body_samples)
-    };
-    let body_mean = mean_of(body_samples);
-    let (mu, sigma) = mean_constrained(mu_mle, sigma_mle, body_mean);
-    let body = match LogNormal::new(mu, sigma) {
-        Ok(_) => {
-            components.push(Component {
-                role: Role::Body,
-                count: split,
-                law: DistSpec::LogNormal { mu, sigma },
-            });
-            Some(Body {
-                count: split,
-                mu,
-                sigma,
-                mu_mle,
-                sigma_mle,
-                mean: body_mean,
-            })
+    let parts = fit_body(&asc[..split]).parts;
+    // The atoms' offsets from their means go to the heaviest part (the first of equals).
+    let heaviest = (0..parts.len())
+        .rev()
+        .max_by(|&i, &j| parts[i].count.total_cmp(&parts[j].count))
+        .unwrap_or(0);
+    let mut absorbed = false;
+    for (i, mut part) in parts.into_iter().enumerate() {
+        if i == heaviest {
+            part.mean = part.sample_mean + excess / part.count;
         }
-        Err(_) => {
-            // A spread too small (or too large) for an f64 lognormal: its mean as a point.
-            PointMass::new(body_mean)?;
-            components.push(Component {
-                role: Role::Body,
-                count: split,
-                law: DistSpec::PointMass { value: body_mean },
-            });
-            None
+        (part.mu, part.sigma) = mean_constrained(part.mu_mle, part.sigma_mle, part.mean);
+        match LogNormal::new(part.mu, part.sigma) {
+            Ok(_) if part.mean > 0.0 => {
+                absorbed |= i == heaviest;
+                components.push(Component {
+                    role: Role::Body,
+                    count: part.count,
+                    law: DistSpec::LogNormal {
+                        mu: part.mu,
+                        sigma: part.sigma,
+                    },
+                    detail: Detail::Body(part),
+                });
+            }
+            _ => {
+                // A spread too small (or too large) for an f64 lognormal: its mean as a point.
+                PointMass::new(part.sample_mean)?;
+                components.push(Component {
+                    role: Role::Body,
+                    count: part.count,
+                    law: DistSpec::PointMass {
+                        value: part.sample_mean,
+                    },
+                    detail: Detail::None,
+                });
+            }
         }
-    };
+    }
     if let Some(t) = tail.and_then(|t| t.fitted) {
         components.push(Component {
             role: Role::Tail,
-            count: t.hill.k,
+            count: t.hill.k as f64,
             law: DistSpec::TruncatedPareto {
                 scale: t.scale,
                 shape: t.shape,
                 upper: t.upper,
             },
+            detail: Detail::Tail(t),
         });
     }
     for x in outliers {
         components.push(Component {
             role: Role::Outlier,
-            count: 1,
+            count: 1.0,
             law: DistSpec::PointMass { value: x },
+            detail: Detail::None,
         });
     }
-    Ok((body, tail))
+    Ok((tail, absorbed))
 }
 
-/// `ln L(B) - ln L(A)` over the `m` continuous samples, where A is one lognormal fitted by
-/// maximum likelihood (spread `sigma_all`) and B the spliced model: the `m - k` body samples
-/// from the lognormal `(mu_b, sigma_b)` fitted to their logs, renormalised below the threshold
-/// `u`, and the `k` tail samples from Hill's Pareto, with weights `(m - k) / m` and `k / m`.
-/// The `sum ln x` terms of both densities cancel, and at the maximum-likelihood fits the
-/// quadratic terms are `m / 2` and `(m - k) / 2`, and Hill's `a sum ln(x / u)` is `k`.
-fn loglik_gain(m: usize, k: usize, sigma_all: f64, mu_b: f64, sigma_b: f64, h: &Hill) -> f64 {
-    let (m, k) = (m as f64, k as f64);
-    let b = m - k;
+/// The body: a mixture of lognormals fitted to `asc` (positive samples, increasing) by
+/// expectation-maximisation on their logs, with 1 to [`MAX_BODY_PARTS`] parts chosen by the
+/// Bayesian information criterion (log-likelihood less `(3K - 1) / 2 ln m`). Real pixel bodies
+/// are often multimodal (a light reached or occluded, an environment seen directly or through
+/// a bounce), which one lognormal misdescribes. A mixture with a part standing for fewer than
+/// [`BODY_MIN_N`] samples is not considered.
+///
+/// EM for `K` parts starts from the `K` runs of [`split_runs`] and stops when the
+/// log-likelihood gains less than `1e-10 m` in an iteration (at most [`EM_MAX_ITER`]); a part's
+/// variance of logs is kept at least [`EM_VAR_FLOOR`] (repeated values would otherwise
+/// collapse it), and a part whose weight vanishes is dropped. Streams longer than
+/// [`EM_MAX_SAMPLES`] are fitted on that many evenly spaced order statistics. A last
+/// expectation step over all samples gives each part its responsibility-weighted count, log
+/// moments and sample mean; the counts sum to `m` and the counts times the means to the
+/// samples' sum, so parts fitted to their own means keep the body's mean exactly. Each part's
+/// `mu`, `sigma` are left for the caller to set (from [`mean_constrained`]).
+pub fn fit_body(asc: &[f64]) -> BodyFit {
+    let m = asc.len();
+    let stride = m.div_ceil(EM_MAX_SAMPLES).max(1);
+    let thin: Vec<f64> = asc
+        .iter()
+        .skip(stride / 2)
+        .step_by(stride)
+        .copied()
+        .collect();
+    let logs: Vec<f64> = thin.iter().map(|x| x.ln()).collect();
+    let mut best: Option<(Vec<Gauss>, f64)> = None;
+    for runs in split_runs(&logs) {
+        let k = runs.len() as f64;
+        let init = runs.iter().map(|r| Gauss::of(r, logs.len())).collect();
+        let (parts, ll) = em(&logs, init);
+        // A part must stand for BODY_MIN_N samples (of the thinned set when thinned).
+        let smallest = parts.iter().map(|g| g.weight).fold(1.0, f64::min);
+        if runs.len() > 1 && smallest * (logs.len() as f64) < BODY_MIN_N as f64 {
+            continue;
+        }
+        let bic = ll - 0.5 * (3.0 * k - 1.0) * (logs.len() as f64).ln();
+        if best.as_ref().is_none_or(|b| bic > b.1) {
+            best = Some((parts, bic));
+        }
+    }
+    let parts = best.map(|b| b.0).unwrap_or_default();
+    // The last expectation step, over every sample.
+    let mut acc = vec![[0.0f64; 4]; parts.len()];
+    let mut l = vec![0.0; parts.len()];
+    let mut loglik = 0.0;
+    for &x in asc {
+        let y = x.ln();
+        loglik += responsibilities(&parts, y, &mut l);
+        for (a, r) in acc.iter_mut().zip(&l) {
+            a[0] += r;
+            a[1] += r * y;
+            a[2] += r * y * y;
+            a[3] += r * x;
+        }
+    }
+    let parts = acc
+        .iter()
+        .filter(|a| a[0] > 0.0)
+        .map(|a| {
+            let mu = a[1] / a[0];
+            let var = (a[2] / a[0] - mu * mu).max(0.0);
+            Body {
+                count: a[0],
+                mu: 0.0,
+                sigma: 0.0,
+                mu_mle: mu,
+                sigma_mle: var.max(EM_VAR_FLOOR).sqrt(),
+                mean: a[3] / a[0],
+                sample_mean: a[3] / a[0],
+            }
+        })
+        .collect();
+    BodyFit { parts, loglik }
+}
+
+/// The body's lognormal mixture and its fit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BodyFit {
+    /// The parts, in increasing order of location as EM left them.
+    pub parts: Vec<Body>,
+    /// Log-likelihood of all the body samples' logs under the mixture.
+    pub loglik: f64,
+}
+
+impl BodyFit {
+    /// Free parameters: a location, a spread and a weight per part, less one weight.
+    pub fn parameters(&self) -> usize {
+        (3 * self.parts.len()).saturating_sub(1)
+    }
+
+    /// `ln P(X <= u)` under the mixture (of the parts' fitted logs, weighted by their counts).
+    pub fn ln_cdf(&self, u: f64) -> f64 {
+        let total: f64 = self.parts.iter().map(|p| p.count).sum();
+        let ln_u = u.ln();
+        // A sum of logs, so that a far-off threshold does not underflow to ln 0.
+        let terms: Vec<f64> = self
+            .parts
+            .iter()
+            .map(|p| (p.count / total).ln() + ln_norm_cdf((ln_u - p.mu_mle) / p.sigma_mle))
+            .collect();
+        let top = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        top + terms.iter().map(|t| (t - top).exp()).sum::<f64>().ln()
+    }
+}
+
+/// A normal part of the mixture of logs.
+#[derive(Clone, Copy, Debug)]
+struct Gauss {
+    weight: f64,
+    mu: f64,
+    var: f64,
+}
+
+impl Gauss {
+    /// The maximum-likelihood normal of `ys`, weighted `ys.len() / m`.
+    fn of(ys: &[f64], m: usize) -> Self {
+        let n = ys.len() as f64;
+        let mu = ys.iter().sum::<f64>() / n;
+        let var = ys.iter().map(|y| (y - mu) * (y - mu)).sum::<f64>() / n;
+        Gauss {
+            weight: n / m as f64,
+            mu,
+            var: var.max(EM_VAR_FLOOR),
+        }
+    }
+}
+
+/// Fills `r` with the parts' responsibilities for `y`; returns `ln` of the mixture density.
+fn responsibilities(parts: &[Gauss], y: f64, r: &mut [f64]) -> f64 {
     let ln_2pi = std::f64::consts::TAU.ln();
-    let d = (h.threshold.ln() - mu_b) / sigma_b;
-    let ll_a = -m * sigma_all.ln() - 0.5 * m * ln_2pi - 0.5 * m;
-    let ll_body = -b * sigma_b.ln() - 0.5 * b * ln_2pi - 0.5 * b - b * ln_norm_cdf(d);
+    let mut top = f64::NEG_INFINITY;
+    for (g, ri) in parts.iter().zip(r.iter_mut()) {
+        let d = y - g.mu;
+        *ri = g.weight.ln() - 0.5 * (ln_2pi + g.var.ln()) - 0.5 * d * d / g.var;
+        top = top.max(*ri);
+    }
+    let mut sum = 0.0;
+    for ri in r.iter_mut() {
+        *ri = (*ri - top).exp();
+        sum += *ri;
+    }
+    r.iter_mut().for_each(|ri| *ri /= sum);
+    top + sum.ln()
+}
+
+/// Expectation-maximisation for a normal mixture of `ys` from `parts`; returns the parts and
+/// the log-likelihood at them.
+fn em(ys: &[f64], mut parts: Vec<Gauss>) -> (Vec<Gauss>, f64) {
+    let m = ys.len() as f64;
+    let centre = ys.iter().sum::<f64>() / m;
+    let mut previous = f64::NEG_INFINITY;
+    let mut r = vec![0.0; parts.len()];
+    for _ in 0..EM_MAX_ITER {
+        let mut acc = vec![[0.0f64; 3]; parts.len()];
+        let mut ll = 0.0;
+        r.resize(parts.len(), 0.0);
+        for &y in ys {
+            ll += responsibilities(&parts, y, &mut r);
+            let d = y - centre;
+            for (a, ri) in acc.iter_mut().zip(&r) {
+                a[0] += ri;
+                a[1] += ri * d;
+                a[2] += ri * d * d;
+            }
+        }
+        if ll - previous < 1e-10 * m {
+            return (parts, ll.max(previous));
+        }
+        previous = ll;
+        parts = acc
+            .iter()
+            .filter(|a| a[0] > 1e-9 * m)
+            .map(|a| {
+                let mean = a[1] / a[0];
+                Gauss {
+                    weight: a[0] / m,
+                    mu: centre + mean,
+                    var: (a[2] / a[0] - mean * mean).max(EM_VAR_FLOOR),
+                }
+            })
+            .collect();
+    }
+    let ll = ys
+        .iter()
+        .map(|&y| responsibilities(&parts, y, &mut r))
+        .sum();
+    (parts, ll)
+}
+
+/// Starting points for EM: `ys` (increasing) as 1 run, then cut at the best split of
+/// [`split_body`] of any run, the run gaining most each time, up to [`MAX_BODY_PARTS`] runs
+/// (fewer when no run can be split).
+pub fn split_runs(ys: &[f64]) -> Vec<Vec<&[f64]>> {
+    let mut runs = vec![ys];
+    let mut all = vec![runs.clone()];
+    while runs.len() < MAX_BODY_PARTS {
+        let best = runs
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| split_body(p).map(|(s, gain)| (i, s, gain)))
+            .max_by(|a, b| a.2.total_cmp(&b.2));
+        let Some((i, s, _)) = best else { break };
+        let (a, b) = runs[i].split_at(s);
+        runs.splice(i..=i, [a, b]);
+        all.push(runs.clone());
+    }
+    all
+}
+
+/// The best place to cut `ys` (logs of samples, increasing) in two normal runs, with its
+/// classification log-likelihood gain over one normal: the cut `ys[..s]`, `ys[s..]` (each at
+/// least [`BODY_MIN_N`] values, between unequal ones) maximising
+/// `sum_runs [-(n_j / 2) ln v_j + n_j ln(n_j / m)]`, `v_j` the run's variance. `None` when no
+/// cut leaves two runs with a spread.
+pub fn split_body(ys: &[f64]) -> Option<(usize, f64)> {
+    let m = ys.len();
+    if m < 2 * BODY_MIN_N {
+        return None;
+    }
+    let centre = ys.iter().sum::<f64>() / m as f64;
+    // Prefix sums of the centred values and their squares.
+    let (mut s1, mut s2) = (vec![0.0; m + 1], vec![0.0; m + 1]);
+    for (i, y) in ys.iter().enumerate() {
+        let d = y - centre;
+        s1[i + 1] = s1[i] + d;
+        s2[i + 1] = s2[i] + d * d;
+    }
+    let var = |a: usize, b: usize| {
+        let n = (b - a) as f64;
+        let mean = (s1[b] - s1[a]) / n;
+        (s2[b] - s2[a]) / n - mean * mean
+    };
+    let mf = m as f64;
+    let v_all = var(0, m);
+    if !(v_all > 0.0) {
+        return None;
+    }
+    let one = -0.5 * mf * v_all.ln();
+    let mut best: Option<(usize, f64)> = None;
+    for s in BODY_MIN_N..=m - BODY_MIN_N {
+        if ys[s - 1] == ys[s] {
+            continue;
+        }
+        let (va, vb) = (var(0, s), var(s, m));
+        // Rounding can leave a tiny or negative variance for a near-constant run.
+        if !(va > 1e-12 * v_all && vb > 1e-12 * v_all) {
+            continue;
+        }
+        let (na, nb) = (s as f64, (m - s) as f64);
+        let ll =
+            -0.5 * na * va.ln() - 0.5 * nb * vb.ln() + na * (na / mf).ln() + nb * (nb / mf).ln();
+        if best.is_none_or(|(_, b)| ll > b) {
+            best = Some((s, ll));
+        }
+    }
+    best.map(|(s, ll)| (s, ll - one))
+}
+
+/// One lognormal fitted to `asc` by maximum likelihood, as a [`BodyFit`] of one part (`mu`,
+/// `sigma` left at 0 like [`fit_body`]'s): what the tail decision compares against.
+fn one_lognormal(asc: &[f64]) -> BodyFit {
+    let m = asc.len() as f64;
+    let (mu, sigma) = log_moments(asc);
+    let sample_mean = mean_of(asc);
+    BodyFit {
+        parts: vec![Body {
+            count: m,
+            mu: 0.0,
+            sigma: 0.0,
+            mu_mle: mu,
+            sigma_mle: sigma,
+            mean: sample_mean,
+            sample_mean,
+        }],
+        // At the maximum-likelihood fit the squares sum to m sigma^2.
+        loglik: -m * sigma.ln() - 0.5 * m * std::f64::consts::TAU.ln() - 0.5 * m,
+    }
+}
+
+/// The log-likelihood gain of splitting a Pareto tail off the `m` continuous samples, and the
+/// gain the Bayesian information criterion asks for, over the logs of the samples. Without a
+/// tail every sample is drawn from the lognormal (mixture) `whole`; with one, the `m - k` body
+/// samples from the one `body` fitted to them, renormalised below the threshold `u`, and
+/// the `k` tail samples from Hill's Pareto (whose log-likelihood on logs is `k ln a - k` at
+/// Hill's estimate), with weights `(m - k) / m` and `k / m`. The tail adds two parameters (`u`
+/// and `a`) to the body's; each parameter asks for `ln(m) / 2`.
+fn tail_gain(whole: &BodyFit, body: &BodyFit, m: usize, h: &Hill) -> (f64, f64) {
+    let (mf, k) = (m as f64, h.k as f64);
+    let b = mf - k;
+    let ll_body = body.loglik - b * body.ln_cdf(h.threshold);
     let ll_tail = k * h.shape.ln() - k;
-    let ll_weights = b * (b / m).ln() + k * (k / m).ln();
-    ll_body + ll_tail + ll_weights - ll_a
+    let ll_weights = b * (b / mf).ln() + k * (k / mf).ln();
+    let gain = ll_body + ll_tail + ll_weights - whole.loglik;
+    let extra = (body.parameters() + 2) as f64 - whole.parameters() as f64;
+    let gain = if gain.is_nan() {
+        f64::NEG_INFINITY
+    } else {
+        gain
+    };
+    (gain, 0.5 * extra * mf.ln())
 }
 
 /// Peels outliers off `tail` (the tail samples, decreasing, all above `u`), then fits the
@@ -914,11 +1279,12 @@ mod tests {
     fn candidates_are_dense_then_geometric() {
         assert!(candidate_ks(19).is_empty());
         assert_eq!(candidate_ks(20), vec![10]);
+        assert_eq!(*candidate_ks(25).last().unwrap(), 12);
         let ks = candidate_ks(100_000);
         assert_eq!(ks[..3], [10, 11, 12]);
         assert_eq!(ks[990], 1000);
         assert_eq!(ks[991], 1010);
-        assert!(*ks.last().unwrap() <= 99_990);
+        assert!(*ks.last().unwrap() <= 50_000);
         assert!(ks.windows(2).all(|w| w[0] < w[1]));
     }
 
