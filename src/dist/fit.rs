@@ -9,40 +9,48 @@
 //!    that found no light). Only present when some sample is 0.
 //! 2. **Point masses** — a light seen directly, or an environment seen through specular
 //!    bounces, returns (nearly) the same radiance every time. Two rules, applied in order, for
-//!    at most [`MAX_ATOMS`] atoms in all:
+//!    at most [`MAX_ATOMS`] atoms in all ([`find_atoms`]):
 //!    - *Clusters*: the densest window `[x, x (1 + NEAR_WIDTH)]` of positive samples holding
 //!      at least a fraction [`NEAR_MIN_FRACTION`] of the stream (and [`ATOM_MIN_COUNT`]
-//!      samples) becomes a point mass at its samples' mean; repeated on what is left. A
-//!      continuous law puts about `NEAR_WIDTH * density(ln x)` of its mass in such a window —
-//!      under 1% unless the spread of `ln x` is below about 0.004, a law indistinguishable from
-//!      a spike — whatever the stream's length. Real pixels need this rule: renderers store
-//!      luminance as `f32`, so a nearly constant contribution (a light sampled by next-event
-//!      estimation, a caustic spike through glass) lands on a handful of neighbouring `f32`
-//!      values rather than on one.
+//!      samples) becomes a point mass; repeated on what is left. A continuous law puts about
+//!      `NEAR_WIDTH * density(ln x)` of its mass in such a window — under 1% unless the spread
+//!      of `ln x` is below about 0.004, a law indistinguishable from a spike — whatever the
+//!      stream's length. Real pixels need this rule: renderers store luminance as `f32`, so a
+//!      nearly constant contribution (a light sampled by next-event estimation, a caustic
+//!      spike through glass) lands on a handful of neighbouring `f32` values rather than on one.
 //!    - *Exact repeats*: a remaining positive value occurring in at least [`ATOM_MIN_COUNT`]
 //!      samples and at least a fraction [`ATOM_MIN_FRACTION`] of the stream, the most frequent
 //!      first. Chance repeats of continuous `f32` values (2^23 per octave) are a few counts in a
 //!      million samples, far below the fraction.
+//!
+//!    An atom sits on its samples' most frequent value, where they are, not between them at
+//!    their mean; the difference (at most `NEAR_WIDTH` of the atom's value) goes into the mean
+//!    of the heaviest body part, or, without a lognormal body, the atoms move to their means.
 //! 3. **Pareto tail** — above a threshold `u` chosen by the rule of Clauset, Shalizi & Newman
 //!    (2009, SIAM Review 51(4), §3.3): over candidate tail sizes `k` (the `k` largest continuous
-//!    samples, threshold the next one down), fit the shape by Hill's estimator
-//!    `a = k / sum ln(x_i / u)` and keep the `k` whose Pareto fit has the smallest
-//!    Kolmogorov-Smirnov distance to the tail samples ([`choose_tail`]). The tail is kept only
-//!    if the spliced body + tail model beats a single lognormal by the Bayesian information
-//!    criterion for its two extra parameters (`u` and `a`): log-likelihood gain `> ln m`, `m`
-//!    the number of continuous samples. A kept tail is a [`TruncatedPareto`] from `u` whose
-//!    upper end is solved so that the component's mean equals the mean of the tail samples
-//!    ([`TailMeanRule`]); truncation keeps the mean finite whatever the Hill shape, so a tail
-//!    with `a <= 1` is no obstacle.
-//! 4. **Lognormal body** — the other continuous samples (all of them when there is no tail):
-//!    the maximum-likelihood lognormal among those whose mean equals the body samples' mean
-//!    ([`mean_constrained`], closed form; the unconstrained fit is reported as `mu_mle`,
-//!    `sigma_mle`, and the two agree when the samples' mean is the lognormal fit's own). The
-//!    crate has no lognormal truncated at `u`, so the body is an untruncated lognormal weighted
-//!    by the body's sample fraction: its small mass above `u` overlaps the tail's. That is the
-//!    approximation: the mixture matches every part's mass and mean
-//!    exactly, and its CDF near `u` is off by that overlap (it shows in [`Fit::ks_log`]). A body
-//!    whose samples are all equal is a point mass instead.
+//!    samples, at most half of them; the threshold is the next one down), fit the shape by
+//!    Hill's estimator `a = k / sum ln(x_i / u)` and keep the `k` whose Pareto fit has the
+//!    smallest Kolmogorov-Smirnov distance to the tail samples ([`choose_tail`]). The tail is
+//!    kept when the continuous samples are heavier-tailed than a lognormal: when one lognormal
+//!    below `u` spliced with the Pareto above it beats one lognormal for all by the Bayesian
+//!    information criterion for the two extra parameters (`u` and `a`), a log-likelihood gain
+//!    above `ln m`, `m` the number of continuous samples. The largest tail samples that the
+//!    Pareto fit of the others makes wildly improbable become point masses of weight `1 / n`
+//!    (outliers, [`Role::Outlier`]: a caustic path found once). The rest is a
+//!    [`TruncatedPareto`] from `u` whose upper end is solved so that its mean equals its samples'
+//!    mean ([`TailMeanRule`]); truncation keeps the mean finite whatever the Hill shape, so a
+//!    tail with `a <= 1` is no obstacle.
+//! 4. **Lognormal body** — the other continuous samples (all of them without a tail): a mixture
+//!    of one to [`MAX_BODY_PARTS`] lognormals fitted by expectation-maximisation on the logs,
+//!    the number of parts chosen by the Bayesian information criterion ([`fit_body`]). Each
+//!    part then becomes the maximum-likelihood lognormal among those whose mean is its own
+//!    (responsibility-weighted) samples' mean ([`mean_constrained`]; the unconstrained fit is
+//!    reported as `mu_mle`, `sigma_mle`, and the two agree when the samples' mean is the fit's
+//!    own). The crate has no lognormal truncated at `u`, so the body parts are untruncated,
+//!    weighted by the samples they stand for: their small mass above `u` overlaps the tail's.
+//!    That is the approximation: the mixture matches every part's mass and mean exactly, and
+//!    its CDF near `u` is off by that overlap (it shows in [`Fit::ks_log`]). Continuous samples
+//!    that are all equal are a point mass instead.
 //!
 //! Every weight is a sample fraction and every component's mean is its own samples' mean, so
 //! **the fitted mean equals the stream's mean** up to rounding (relative 1e-9 or better): it is
@@ -66,7 +74,10 @@ pub const ATOM_MIN_FRACTION: f64 = 1e-4;
 /// The most lognormal parts of the body (see [`fit_body`]).
 pub const MAX_BODY_PARTS: usize = 4;
 /// The most iterations of expectation-maximisation for the body.
-pub const EM_MAX_ITER: usize = 500;
+pub const EM_MAX_ITER: usize = 300;
+/// EM stops when an iteration gains less than this log-likelihood per sample: far below the
+/// `ln(m) / 2` per parameter that the choice of the number of parts weighs.
+pub const EM_TOLERANCE: f64 = 1e-7;
 /// The smallest variance of a body part's logs (a spread of 0.1%).
 pub const EM_VAR_FLOOR: f64 = 1e-6;
 /// The most samples EM runs on; longer bodies are thinned to evenly spaced order statistics.
@@ -861,10 +872,10 @@ fn fit_continuous(
 /// a bounce), which one lognormal misdescribes. A mixture with a part standing for fewer than
 /// [`BODY_MIN_N`] samples is not considered.
 ///
-/// EM for `K` parts starts from the `K` runs of [`split_runs`] and stops when the
-/// log-likelihood gains less than `1e-10 m` in an iteration (at most [`EM_MAX_ITER`]); a part's
-/// variance of logs is kept at least [`EM_VAR_FLOOR`] (repeated values would otherwise
-/// collapse it), and a part whose weight vanishes is dropped. Streams longer than
+/// EM for `K` parts starts from the `K` runs of [`split_runs`] and stops when an iteration
+/// gains less than `m` times [`EM_TOLERANCE`] in log-likelihood (at most [`EM_MAX_ITER`]
+/// iterations); a part's variance of logs is kept at least [`EM_VAR_FLOOR`] (repeated values
+/// would otherwise collapse it), and a part whose weight vanishes is dropped. Streams longer than
 /// [`EM_MAX_SAMPLES`] are fitted on that many evenly spaced order statistics. A last
 /// expectation step over all samples gives each part its responsibility-weighted count, log
 /// moments and sample mean; the counts sum to `m` and the counts times the means to the
@@ -1020,7 +1031,7 @@ fn em(ys: &[f64], mut parts: Vec<Gauss>) -> (Vec<Gauss>, f64) {
                 a[2] += ri * d * d;
             }
         }
-        if ll - previous < 1e-10 * m {
+        if ll - previous < EM_TOLERANCE * m {
             return (parts, ll.max(previous));
         }
         previous = ll;
