@@ -201,7 +201,8 @@ fn recovers_a_lognormal() {
     // lognormal(0.5, 0.8), 4096 samples: SE(mu) = 0.8 / 64 = 0.0125, SE(sigma) = 0.0088. Catches
     // a location or spread off by 0.07 or 0.05 (a wrong log, variance divisor, or a spurious
     // tail or extra part, which would also fail the structure check). The mean-constrained
-    // parameters move with the sample mean (relative SE 1.5%): checked to 0.06.
+    // parameters move with the sample mean (relative SE 1.5%): checked to 0.06. Over 200 seeds
+    // none gave a tail or a second part (so below 1.5% per seed, by the rule of three).
     let xs = draw(
         &law(r#"{"kind":"lognormal","mu":0.5,"sigma":0.8}"#),
         1,
@@ -230,7 +231,8 @@ fn recovers_a_lognormal() {
 fn recovers_zeros_and_a_lognormal() {
     // 30% zeros: the fraction has SE sqrt(0.21 / 4096) = 0.0072; the body lognormal(-1, 1) of
     // ~2870 samples SE 0.019 (mu) and 0.013 (sigma). Catches a zero mass off by 0.036 (zeros
-    // counted in the body) or parameters off by 0.1 / 0.07.
+    // counted in the body) or parameters off by 0.1 / 0.07. Over 200 seeds the structure was
+    // always zero mass + one lognormal.
     let d = law(r#"{"kind":"mixture","components":[
             {"weight":0.3,"dist":{"kind":"point-mass","value":0.0}},
             {"weight":0.7,"dist":{"kind":"lognormal","mu":-1.0,"sigma":1.0}}]}"#);
@@ -251,7 +253,8 @@ fn recovers_zeros_and_a_lognormal() {
 #[test]
 fn recovers_point_masses() {
     // 20% zeros, 10% exactly 5, 70% lognormal(0, 0.5): weights SE 0.0063 and 0.0047, body
-    // (~2870 samples) SE 0.0093 (mu) and 0.0066 (sigma). The atom is 5 exactly.
+    // (~2870 samples) SE 0.0093 (mu) and 0.0066 (sigma). The atom is 5 exactly. Over 200 seeds
+    // the structure was always zero mass + atom + one lognormal.
     let d = law(r#"{"kind":"mixture","components":[
             {"weight":0.2,"dist":{"kind":"point-mass","value":0.0}},
             {"weight":0.1,"dist":{"kind":"point-mass","value":5.0}},
@@ -287,11 +290,13 @@ fn recovers_point_masses() {
 fn recovers_a_lognormal_body_and_a_pareto_tail() {
     // 95% lognormal(0, 0.5) and 5% pareto(e^2, 1.5), 20 000 samples: ~1000 tail samples. The
     // lognormal has mass 3e-5 above e^2, so the rule should find the tail near e^2 (it may
-    // start a little higher: the Pareto's bottom end is thin) and Hill's shape within 5 of its
-    // own standard errors of 1.5 (~0.05 each; over 200 seeds the largest deviation seen was 3.4
-    // SE). The body's main part is the lognormal (SE 0.0036 for mu, 0.0026 for sigma).
-    // Catches a missing tail, a threshold in the body (ln u off by more than 1), a shape off
-    // by 0.25.
+    // start higher: the Pareto's bottom end is thin, and what lies below the threshold joins
+    // the body as extra parts) and Hill's shape within 5 of its standard errors (~0.05) of 1.5.
+    // The body's main part is the lognormal (SE 0.0036 for mu, 0.0026 for sigma). Over 200 seeds
+    // the tail was always kept, Hill within 3.4 SE and ln u within 0.84 of 2; over 60 of them
+    // the main part within 2.4 SE, its weight within 0.006 of 0.95, k between 342 and 1098.
+    // Catches a missing tail, a threshold in the body (ln u off by more than 1), a shape off by
+    // 0.25, a body spoilt by the tail.
     let d = law(r#"{"kind":"mixture","components":[
             {"weight":0.95,"dist":{"kind":"lognormal","mu":0.0,"sigma":0.5}},
             {"weight":0.05,"dist":{"kind":"pareto","scale":7.38905609893065,"shape":1.5}}]}"#);
@@ -310,7 +315,7 @@ fn recovers_a_lognormal_body_and_a_pareto_tail() {
         h.shape,
         h.se
     );
-    assert!(h.k > 300 && h.k < 1500, "k = {}", h.k);
+    assert!(h.k > 150 && h.k < 2000, "k = {}", h.k);
     assert!(fitted.shape > 1.0 && fitted.upper > fitted.scale);
     let main = f
         .bodies()
