@@ -43,6 +43,14 @@ pub fn run(args: &FitArgs) -> Result<ExitCode> {
     });
     let out = report(&fitted, &label)?;
     if let Some(path) = &args.qq {
+        if fitted.qq_threshold().is_none() {
+            return Err(Error::param(
+                "qq",
+                path.display(),
+                "no tail threshold to plot above: the threshold rule needs at least 20 positive \
+                 samples that are not point masses",
+            ));
+        }
         let points = fitted.tail_qq(&samples);
         let title = format!("Tail QQ plot: {label}");
         let note = qq_note(&fitted, points.len());

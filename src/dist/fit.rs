@@ -411,7 +411,7 @@ pub struct TailFit {
 pub enum Role {
     /// Samples exactly 0.
     Zero,
-    /// An exactly repeated positive value.
+    /// An exactly repeated positive value, or a cluster of nearly equal ones.
     Atom,
     /// The lognormal body (or a point mass when its samples are all equal).
     Body,
@@ -476,7 +476,7 @@ impl Fit {
         self.stream_mean == 0.0
     }
 
-    /// The lognormal body parts (one, or two when the body splits).
+    /// The lognormal body parts (up to [`MAX_BODY_PARTS`]).
     pub fn bodies(&self) -> Vec<Body> {
         self.components
             .iter()
