@@ -629,6 +629,10 @@ fn cli_reads_stdin_and_reports_input_errors_with_exit_2() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(needle), "{input:?}: {err}");
     }
+    // Too few samples for a threshold: the QQ plot cannot be drawn, and says why.
+    let out = run_with_stdin(&["fit", "--qq", "/tmp/never-written.png"], "1 2 3");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no tail threshold"));
     let out = bin()
         .args(["fit", "/nonexistent/pixel.txt"])
         .output()
