@@ -50,13 +50,13 @@ fn parse_specs(texts: &[String]) -> Result<Vec<EstimatorSpec>> {
 
 /// Where samples come from: standard input (`-` or no file) or a named file.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Input<'a> {
+pub(super) enum Input<'a> {
     Stdin,
     File(&'a Path),
 }
 
 impl<'a> Input<'a> {
-    fn new(path: Option<&'a PathBuf>) -> Self {
+    pub(super) fn new(path: Option<&'a PathBuf>) -> Self {
         match path {
             Some(p) if p.as_os_str() != "-" => Input::File(p),
             _ => Input::Stdin,
@@ -64,7 +64,7 @@ impl<'a> Input<'a> {
     }
 
     /// The name in messages, control characters escaped.
-    fn name(self) -> String {
+    pub(super) fn name(self) -> String {
         match self {
             Input::Stdin => "-".to_string(),
             Input::File(p) => samples::visible(&p.display().to_string()),
@@ -72,7 +72,7 @@ impl<'a> Input<'a> {
     }
 
     /// Streams the input once, block by block; returns the sample count.
-    fn stream(self, mut on_block: impl FnMut(&[f64])) -> Result<u64> {
+    pub(super) fn stream(self, mut on_block: impl FnMut(&[f64])) -> Result<u64> {
         let name = self.name();
         let push = |block: &[f64]| {
             on_block(block);

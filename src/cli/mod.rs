@@ -2,6 +2,7 @@
 
 mod compare;
 mod eval;
+mod fit;
 mod gate;
 mod merge;
 mod reference;
@@ -30,6 +31,8 @@ pub struct Cli {
 enum Command {
     /// Evaluate estimators on sample files (one JSON object per estimator on stdout).
     Eval(eval::EvalArgs),
+    /// Fit a generator to one pixel's luminance stream (one JSON object on stdout).
+    Fit(fit::FitArgs),
     /// Run an experiment (default: the embedded one) and write its report.
     Run(run::RunArgs),
     /// Compare a run with a committed baseline; exit 1 on a regression.
@@ -49,6 +52,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     let memory = MemoryLimit::from_setting(cli.max_memory.as_deref())?;
     match cli.command {
         Some(Command::Eval(args)) => eval::run(&args),
+        Some(Command::Fit(args)) => fit::run(&args),
         Some(Command::Run(args)) => run::run(&args, memory),
         Some(Command::Merge(args)) => merge::run(&args),
         Some(Command::Gate(args)) => gate::run(&args, memory),

@@ -19,6 +19,7 @@ use std::fmt;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
+pub mod fit;
 mod lognormal;
 mod mixture;
 mod pareto;

@@ -3,6 +3,7 @@
 //! either the earlier report, complete, or the new one, never a mix of two runs.
 
 pub mod plots;
+pub mod qq;
 pub mod tables;
 
 pub use crate::atomic::write_atomic;

@@ -27,7 +27,7 @@ use std::sync::OnceLock;
 
 /// Font family name under which the embedded DejaVu Sans is registered. SVG files name it in
 /// `font-family`, so a viewer without DejaVu still picks its own sans-serif face.
-const FONT: &str = "sans-serif";
+pub(crate) const FONT: &str = "sans-serif";
 /// Size of one panel in pixels for the per-distribution figures.
 const PANEL: (u32, u32) = (480, 360);
 /// Size of one panel of the error-quantile fans, whose grid has a panel per estimator too.
@@ -96,7 +96,7 @@ pub fn write_plots(dir: &Path, rows: &[Row]) -> Result<Vec<PathBuf>> {
 }
 
 /// Registers DejaVu Sans (regular and bold) with plotters once per process.
-fn register_fonts() -> Result<()> {
+pub(crate) fn register_fonts() -> Result<()> {
     static REGISTERED: OnceLock<std::result::Result<(), String>> = OnceLock::new();
     REGISTERED
         .get_or_init(|| {
@@ -994,7 +994,7 @@ fn resolve_range(axis: &Axis, marks: &[Mark], vertical: bool) -> (f64, f64) {
 
 /// Tick positions for `lo..hi`: powers of ten (thinned, or with 2 and 5 between) on a log
 /// axis, multiples of 1, 2, 2.5 or 5 times a power of ten on a linear one.
-fn ticks(log: bool, lo: f64, hi: f64) -> Vec<f64> {
+pub(crate) fn ticks(log: bool, lo: f64, hi: f64) -> Vec<f64> {
     if log {
         let (a, b) = (lo.log10().ceil() as i32, hi.log10().floor() as i32);
         let decades = (b - a + 1).max(0) as usize;
@@ -1031,7 +1031,7 @@ fn ticks(log: bool, lo: f64, hi: f64) -> Vec<f64> {
 }
 
 /// Tick labels: plain decimals from 0.001 to 99999, else a power of ten in superscript.
-fn fmt_tick(v: f64) -> String {
+pub(crate) fn fmt_tick(v: f64) -> String {
     if v == 0.0 {
         return "0".into();
     }
@@ -1066,11 +1066,11 @@ fn fmt_tick(v: f64) -> String {
 /// the range are pinned to its edge, which is how the lower end of an interval below a log
 /// axis is drawn.
 #[derive(Clone)]
-struct Coord {
-    log: bool,
-    lo: f64,
-    hi: f64,
-    ticks: Vec<f64>,
+pub(crate) struct Coord {
+    pub(crate) log: bool,
+    pub(crate) lo: f64,
+    pub(crate) hi: f64,
+    pub(crate) ticks: Vec<f64>,
 }
 
 impl Coord {
