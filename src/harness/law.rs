@@ -195,7 +195,8 @@ impl MeanLaw {
         }
     }
 
-    /// The mean's bias interval in the law's units, from the null; `None` without spread.
+    /// The mean's bias interval in the law's units, from the null; the observed one (which
+    /// is then exact up to rounding) for a law without spread.
     pub fn bias_interval(&self, observed: Interval, mu: f64) -> Interval {
         let Some(null) = &self.null else {
             return observed;

@@ -992,6 +992,18 @@ mod tests {
     }
 
     #[test]
+    fn metric_names_round_trip_and_unknown_names_are_errors() {
+        for m in Metric::ALL {
+            assert_eq!(m.name().parse::<Metric>(), Ok(m));
+        }
+        let e = "relative_bais".parse::<Metric>().unwrap_err();
+        assert!(
+            e.contains("relative_bais") && e.contains("relative_bias"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn histogram_merge_is_order_free() {
         let mut a = LogHistogram::default();
         let mut b = LogHistogram::default();
