@@ -655,10 +655,13 @@ impl Outcome {
 }
 
 /// What is wrong with a gated row, if anything: NaN anywhere; without a caveat, an infinite
-/// value or a missing, NaN or negative standard error.
+/// value or a missing, infinite or negative standard error.
 fn invalid(r: &Row) -> Option<String> {
     if r.value.is_nan() {
         return Some("value NaN".into());
+    }
+    if r.se.is_some_and(f64::is_nan) {
+        return Some("standard error NaN".into());
     }
     if r.caveat.is_some() {
         return None;
