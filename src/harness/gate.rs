@@ -563,7 +563,7 @@ impl Snapshot {
         }
         let identity: Identity = serde_json::from_value(serde_json::Value::Object(fields))
             .map_err(|e| at(header_lines, format!("header: {e}")))?;
-        let mut reader = csv::Reader::from_reader(text[body..].as_bytes());
+        let mut reader = csv::Reader::from_reader(&text.as_bytes()[body..]);
         let rows = reader
             .deserialize()
             .enumerate()
@@ -1116,7 +1116,11 @@ mod tests {
             row(Metric::Variance, 5.0, f64::NAN),
             no_se,
         ] {
-            let out = compare(&[row(Metric::Variance, 5.0, 0.1)], &[bad.clone()], &cfg);
+            let out = compare(
+                &[row(Metric::Variance, 5.0, 0.1)],
+                std::slice::from_ref(&bad),
+                &cfg,
+            );
             assert!(out.failed(), "{bad:?}");
             assert!(
                 matches!(
