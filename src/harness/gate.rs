@@ -256,12 +256,14 @@ pub enum Problem {
         /// The missing metrics.
         metrics: Vec<Metric>,
     },
-    /// A gated row of a cell the experiment does not have.
+    /// Gated rows of a cell the experiment does not have.
     Unexpected {
-        /// The table holding it.
+        /// The table holding them.
         side: Side,
-        /// The row's key.
-        key: Key,
+        /// Distribution, estimator, n.
+        cell: (String, String, usize),
+        /// The metrics.
+        metrics: Vec<Metric>,
     },
     /// A gated row that appears more than once.
     Duplicate {
@@ -297,21 +299,15 @@ impl fmt::Display for Problem {
                 side,
                 cell,
                 metrics,
-            } => {
-                let names: Vec<&str> = metrics.iter().map(|m| m.name()).collect();
-                write!(
-                    f,
-                    "missing from the {side}: {} / {} / n = {}: {}",
-                    cell.0,
-                    cell.1,
-                    cell.2,
-                    names.join(", ")
-                )
-            }
-            Problem::Unexpected { side, key } => write!(
+            } => write!(f, "missing from the {side}: {}", cell_text(cell, metrics)),
+            Problem::Unexpected {
+                side,
+                cell,
+                metrics,
+            } => write!(
                 f,
-                "not a cell of the experiment, in the {side}: {} / {} / n = {}: {}",
-                key.0, key.1, key.2, key.3
+                "not a cell of the experiment, in the {side}: {}",
+                cell_text(cell, metrics)
             ),
             Problem::Duplicate { side, key } => write!(
                 f,
@@ -325,6 +321,18 @@ impl fmt::Display for Problem {
             ),
         }
     }
+}
+
+/// `glossy / mean / n = 16: relative_bias, variance`.
+fn cell_text(cell: &(String, String, usize), metrics: &[Metric]) -> String {
+    let names: Vec<&str> = metrics.iter().map(|m| m.name()).collect();
+    format!(
+        "{} / {} / n = {}: {}",
+        cell.0,
+        cell.1,
+        cell.2,
+        names.join(", ")
+    )
 }
 
 /// The run that produced a table: the gate compares only runs of the same experiment.
@@ -676,8 +684,22 @@ fn invalid(r: &Row) -> Option<String> {
     }
 }
 
-/// The gated rows of a table by key, with duplicates, invalid rows and rows outside
-/// `expected` reported.
+/// Keys grouped by cell, as problems.
+fn by_cell(
+    keys: Vec<&Key>,
+    problem: impl Fn((String, String, usize), Vec<Metric>) -> Problem,
+) -> Vec<Problem> {
+    let mut cells: BTreeMap<(String, String, usize), Vec<Metric>> = BTreeMap::new();
+    for k in keys {
+        cells
+            .entry((k.0.clone(), k.1.clone(), k.2))
+            .or_default()
+            .push(k.3);
+    }
+    cells.into_iter().map(|(c, m)| problem(c, m)).collect()
+}
+
+/// The gated rows of a table by key, with duplicates and rows outside `expected` reported.
 fn index<'a>(
     rows: &'a [Row],
     side: Side,
@@ -687,33 +709,30 @@ fn index<'a>(
 ) -> BTreeMap<Key, &'a Row> {
     let mut map = BTreeMap::new();
     for r in rows.iter().filter(|r| rule(r.metric, cfg).is_some()) {
-        let k = key(r);
-        if map.insert(k.clone(), r).is_some() {
-            problems.push(Problem::Duplicate { side, key: k });
-        } else if !expected.contains(&k) {
-            problems.push(Problem::Unexpected { side, key: k });
+        if map.insert(key(r), r).is_some() {
+            problems.push(Problem::Duplicate { side, key: key(r) });
         }
     }
+    let unexpected: Vec<&Key> = map.keys().filter(|k| !expected.contains(*k)).collect();
+    problems.extend(by_cell(unexpected, |cell, metrics| Problem::Unexpected {
+        side,
+        cell,
+        metrics,
+    }));
     map
 }
 
 /// The cells of `expected` that `table` lacks, grouped by cell.
 fn missing(expected: &BTreeSet<Key>, table: &BTreeMap<Key, &Row>, side: Side) -> Vec<Problem> {
-    let mut by_cell: BTreeMap<(String, String, usize), Vec<Metric>> = BTreeMap::new();
-    for k in expected.iter().filter(|k| !table.contains_key(*k)) {
-        by_cell
-            .entry((k.0.clone(), k.1.clone(), k.2))
-            .or_default()
-            .push(k.3);
-    }
-    by_cell
-        .into_iter()
-        .map(|(cell, metrics)| Problem::Missing {
-            side,
-            cell,
-            metrics,
-        })
-        .collect()
+    let absent: Vec<&Key> = expected
+        .iter()
+        .filter(|k| !table.contains_key(*k))
+        .collect();
+    by_cell(absent, |cell, metrics| Problem::Missing {
+        side,
+        cell,
+        metrics,
+    })
 }
 
 /// Why `snapshot` cannot be a baseline: the gated rows of its identity that it lacks, holds
@@ -738,31 +757,15 @@ pub fn incomplete(snapshot: &Snapshot, cfg: &GateConfig) -> Vec<Problem> {
 /// Compares a run with the baseline: identities, completeness of both tables against the
 /// experiment's cells, then every gated metric ([`compare`]).
 pub fn gate(baseline: &Snapshot, now: &Snapshot, cfg: &GateConfig) -> Outcome {
+    let mut out = compare_expected(&baseline.rows, &now.rows, &now.identity.expected(cfg), cfg);
     let mut problems = baseline.identity.differences(&now.identity);
-    let expected = now.identity.expected(cfg);
-    let base = index(
-        &baseline.rows,
-        Side::Baseline,
-        &expected,
-        cfg,
-        &mut problems,
-    );
-    let cur = index(&now.rows, Side::Results, &expected, cfg, &mut problems);
-    problems.extend(missing(&expected, &base, Side::Baseline));
-    problems.extend(missing(&expected, &cur, Side::Results));
-    let mut out = compare(&baseline.rows, &now.rows, cfg);
-    // `compare` reports what it found on its own; keep each problem once.
-    for p in out.problems.drain(..) {
-        if !problems.contains(&p) {
-            problems.push(p);
-        }
-    }
+    problems.append(&mut out.problems);
     out.problems = problems;
     out
 }
 
-/// Compares every gated metric of two tables, without identities: rows gated on one side
-/// only, duplicated or invalid are problems; the rest are tested against their margins, Holm
+/// Compares every gated metric of two tables, without identities: a gated row on one side
+/// only, duplicated or invalid is a problem; the rest are tested against their margins, Holm
 /// across all gated comparisons at `cfg.family_alpha`.
 pub fn compare(baseline: &[Row], now: &[Row], cfg: &GateConfig) -> Outcome {
     let keys: BTreeSet<Key> = baseline
@@ -771,11 +774,21 @@ pub fn compare(baseline: &[Row], now: &[Row], cfg: &GateConfig) -> Outcome {
         .filter(|r| rule(r.metric, cfg).is_some())
         .map(key)
         .collect();
+    compare_expected(baseline, now, &keys, cfg)
+}
+
+/// [`compare`], where both tables must hold exactly the gated rows `expected`.
+fn compare_expected(
+    baseline: &[Row],
+    now: &[Row],
+    expected: &BTreeSet<Key>,
+    cfg: &GateConfig,
+) -> Outcome {
     let mut problems = Vec::new();
-    let base = index(baseline, Side::Baseline, &keys, cfg, &mut problems);
-    let cur = index(now, Side::Results, &keys, cfg, &mut problems);
-    problems.extend(missing(&keys, &base, Side::Baseline));
-    problems.extend(missing(&keys, &cur, Side::Results));
+    let base = index(baseline, Side::Baseline, expected, cfg, &mut problems);
+    let cur = index(now, Side::Results, expected, cfg, &mut problems);
+    problems.extend(missing(expected, &base, Side::Baseline));
+    problems.extend(missing(expected, &cur, Side::Results));
     let std = Normal::new(0.0, 1.0).expect("standard normal");
     let mut out = Vec::new();
     // (comparison index, standard errors of each contrast) for the detectable worsening.
