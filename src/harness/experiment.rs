@@ -216,6 +216,7 @@ impl Experiment {
                 "must be in (0, 1]",
             ));
         }
+        file.gate.validate()?;
         let entry = |list: &str, i: usize, text: &str, e: Error| {
             at(format!("{list}[{i}] = \"{}\"", shorten(text)), &e)
         };
