@@ -364,6 +364,8 @@ struct ManifestIdentity {
     seed: u64,
     trials: u64,
     checkpoints: Vec<usize>,
+    /// Absent from manifests written before it was recorded: then the experiment's is assumed.
+    tau: Option<f64>,
     estimators: Vec<String>,
     distributions: Vec<(String, String)>,
     crate_version: String,
@@ -407,7 +409,7 @@ impl Identity {
             seed: m.seed,
             trials: m.trials,
             checkpoints: m.checkpoints,
-            tau: exp.file.tau,
+            tau: m.tau.unwrap_or(exp.file.tau),
             estimators: m.estimators,
             distributions: m.distributions,
             crate_version: m.crate_version,

@@ -358,6 +358,8 @@ pub struct Manifest<'a> {
     pub trials: u64,
     /// Checkpoints.
     pub checkpoints: &'a [usize],
+    /// Firefly threshold: an estimate above `(1 + tau) mu` is a firefly.
+    pub tau: f64,
     /// Estimator spec strings, canonical.
     pub estimators: Vec<String>,
     /// Distribution labels and laws.
@@ -393,6 +395,7 @@ pub fn manifest_json(exp: &Experiment, out: &RunOutput, checks: &[CheckResult]) 
         seed: exp.file.seed,
         trials: out.trials,
         checkpoints: &exp.file.checkpoints,
+        tau: exp.file.tau,
         estimators: exp.estimators.iter().map(ToString::to_string).collect(),
         distributions: out
             .dists
