@@ -231,8 +231,8 @@ pub fn summary_md(
     let _ = writeln!(
         s,
         "Primary metric: median absolute relative error; its 95% interval runs between the \
-         edges of the histogram bins holding the order statistics that bound it (bins 2.3% \
-         wide; an error of exactly 0 or 1 is exact). The plain mean's bias interval comes from \
+         order statistics that bound it, read from a histogram (bins 2.3% wide, a value placed \
+         inside its bin by its rank; an error of exactly 0 or 1 is exact). The plain mean's bias interval comes from \
          the law's own null of its grand mean (normal body, simulated rare tail), so it holds on \
          heavy tails; other bias intervals are normal-theory. Variance and MSE intervals are \
          scaled chi-square (never below 0) with a fourth-moment standard error. \
