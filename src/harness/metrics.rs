@@ -579,10 +579,22 @@ pub fn wilson(successes: u64, trials: u64) -> Interval {
     let z2 = Z * Z;
     let centre = (p + z2 / (2.0 * m)) / (1.0 + z2 / m);
     let half = Z * (p * (1.0 - p) / m + z2 / (4.0 * m * m)).sqrt() / (1.0 + z2 / m);
+    // At 0 or all successes the end on that side is exactly 0 or 1 (rounding would otherwise
+    // leave 0.9999999999999999, excluding a true rate of 1).
+    let low = if successes == 0 {
+        0.0
+    } else {
+        (centre - half).max(0.0)
+    };
+    let high = if successes == trials {
+        1.0
+    } else {
+        (centre + half).min(1.0)
+    };
     Interval {
         value: p,
-        low: Some((centre - half).max(0.0)),
-        high: Some((centre + half).min(1.0)),
+        low: Some(low),
+        high: Some(high),
         // The Wilson half-width over Z: never 0, even when no trial succeeded.
         se: Some(half / Z),
     }
@@ -897,6 +909,14 @@ mod tests {
         let mean = xs.iter().sum::<f64>() / 1000.0;
         let m4: f64 = xs.iter().map(|x| (x - mean).powi(4)).sum::<f64>();
         assert!((all.m4 - m4).abs() < 1e-9 * m4);
+    }
+
+    #[test]
+    fn wilson_reaches_the_bounds_exactly() {
+        for m in [1, 7, 107, 122, 4096] {
+            assert_eq!(wilson(m, m).high, Some(1.0), "{m}");
+            assert_eq!(wilson(0, m).low, Some(0.0), "{m}");
+        }
     }
 
     #[test]
