@@ -31,8 +31,8 @@ fn the_experiment_file_parses_full_and_quick() {
         names,
         ["cbox", "caustic", "mirror_room", "veach_mis", "living-room"]
     );
-    // mean, 3 x 5 of the MoN family, Jung, 8 Zirr, zirr-ref, two Pajot.
-    assert_eq!(full.estimators.len(), 28);
+    // mean, 3 x 5 of the MoN family, Jung, 2 x 6 Zirr, zirr-ref, two Pajot.
+    assert_eq!(full.estimators.len(), 32);
     assert_eq!(full.plot.len(), 9);
     let living = &full.scenes[4];
     assert!(living.box_filter);
@@ -136,7 +136,7 @@ plot_estimators = ["mean", "gmon:M=5"]
 bias_map_estimators = ["mean", "gmon:M=5"]
 crop_estimators = ["mean", "zirr:b=8,kappa=1"]
 crop_spp = 8
-cost = {{ pixels = 16, spp = 8, repeats = 1 }}
+cost = {{ pixels = 16, spp = 8, repeats = 1, mean_render_spp = 4 }}
 quick = {{ resolution = 0.5, spp = 16, reference_spp = 64 }}
 
 [[scenes]]
@@ -234,6 +234,15 @@ fn a_tiny_quick_run_writes_rows_tables_and_figures_and_reuses_its_reference() {
     let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
     assert!(summary.contains("QUICK RUN"), "{summary}");
     assert!(summary.contains("Table 1") && summary.contains("Table 4"));
+    let info = std::fs::read_to_string(report.join("scenes.csv")).unwrap();
+    let (head, values) = (
+        info.lines().next().unwrap().split(',').collect::<Vec<_>>(),
+        info.lines().nth(1).unwrap().split(',').collect::<Vec<_>>(),
+    );
+    let col = |name: &str| values[head.iter().position(|h| *h == name).unwrap()];
+    assert_eq!(col("mean_render_spp"), "4");
+    assert!(col("mean_render_ns_per_sample").parse::<f64>().unwrap() > 0.0);
+    assert_eq!(col("reference_spp"), "64");
     let costs = std::fs::read_to_string(report.join("costs.csv")).unwrap();
     assert_eq!(costs.lines().count(), 1 + 4);
     let delayed = std::fs::read_to_string(report.join("delayed.csv")).unwrap();

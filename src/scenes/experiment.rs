@@ -83,6 +83,11 @@ pub struct CostEntry {
     /// Timed repetitions of each estimator; the fastest is kept.
     #[serde(default = "default_repeats")]
     pub repeats: u32,
+    /// Samples per pixel of a second render with the mean alone (at most the scene's spp; 0:
+    /// none), whose CPU time per sample against the full render's measures the whole bank's
+    /// cost inside a real render.
+    #[serde(default)]
+    pub mean_render_spp: u32,
 }
 
 impl Default for CostEntry {
@@ -91,6 +96,7 @@ impl Default for CostEntry {
             pixels: default_cost_pixels(),
             spp: default_cost_spp(),
             repeats: default_repeats(),
+            mean_render_spp: 0,
         }
     }
 }

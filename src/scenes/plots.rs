@@ -305,7 +305,7 @@ fn zirr_figure(points: &[ZirrPoint], tag: &str) -> Option<Figure> {
     });
     Some(Figure {
         name: "zirr_kappa",
-        title: format!("Zirr et al.'s Figure 6 on our scenes: RMSE against κ{tag}"),
+        title: format!("RMSE against κ (Zirr et al., Fig. 6){tag}"),
         legend,
         notes: vec![
             "The paper's method (zirr: J grows on demand, κ_min = 1, u = 1) on the 3x3 \
@@ -441,7 +441,14 @@ fn draw_tiles(
     let header = TOP + 34 + lines.len() as i32 * 20 + 8;
     let row_h = CAPTION + tile_h + GAP;
     let height = header + rows.len() as i32 * row_h + GAP;
-    let (w, h) = (width as u32, height.max(header + 200) as u32);
+    // Room under the colour bar for its two-line label.
+    let bar_bottom = header + CAPTION + (rows.len() as i32 * row_h - CAPTION - GAP).max(100) + 50;
+    let height = if colour_bar.is_some() {
+        height.max(bar_bottom)
+    } else {
+        height
+    };
+    let (w, h) = (width as u32, height as u32);
     let mut buf = vec![255u8; w as usize * h as usize * 3];
     let tile_origin = |r: usize, c: usize| {
         (

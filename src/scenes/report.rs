@@ -162,12 +162,13 @@ fn summary_md(
     s.push_str(
         "| scene | size | spp | reference spp | reference rel. SE per pixel (RMS) | of the image mean | \
          its relMSE floor | render wall s | render CPU s | trace ns/sample | bank ns/sample (model) | \
-         render ns/sample (measured) |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+         render ns/sample (measured) | mean-alone render ns/sample (measured) |\n\
+         |---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for i in infos {
         let _ = writeln!(
             s,
-            "| {} | {}x{}{} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.0} | {:.0} | {:.0} |",
+            "| {} | {}x{}{} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.0} | {:.0} | {:.0} | {} |",
             i.scene,
             i.width,
             i.height,
@@ -188,13 +189,23 @@ fn summary_md(
             i.trace_ns_per_sample,
             i.modelled_ns_per_sample,
             i.measured_ns_per_sample,
+            match (i.mean_render_ns_per_sample, i.mean_render_spp) {
+                (Some(ns), Some(spp)) => format!(
+                    "{ns:.0} ({spp} spp; bank {:.0}% of the full render)",
+                    100.0 * (1.0 - ns / i.measured_ns_per_sample)
+                ),
+                _ => "—".into(),
+            },
         );
     }
     s.push_str(
         "\nA reference's relMSE floor (`expected_relmse`) is about what its own noise adds to \
          any image's relMSE against it. Trace and bank costs per sample are CPU time on one \
          thread from the cost measurement (`costs.csv`); the measured column is the render's \
-         CPU time over its samples, estimate reads excluded.\n\n",
+         CPU time over its samples, estimate reads excluded (all threads' CPU time, so it \
+         also holds the thread pool's waiting); the last column is the same for a render with \
+         the mean alone, and `1 − mean alone / full` is the whole bank's share of the full \
+         render as measured inside renders.\n\n",
     );
 
     s.push_str("## Estimator cost as a fraction of render time\n\n");

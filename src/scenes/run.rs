@@ -364,6 +364,23 @@ pub fn run_scene(
         scene.name
     ));
 
+    // The whole bank's cost inside a real render: the same scene with the mean alone.
+    let mean_render = match exp.file.cost.mean_render_spp.min(scene.spp) {
+        0 => None,
+        spp => {
+            let cfg = FilmConfig {
+                estimators: vec![EstimatorSpec::Mean],
+                spp,
+                checkpoints: Vec::new(),
+                ..cfg.clone()
+            };
+            let cpu0 = process_cpu_seconds();
+            let out = film::render(&world, &cfg, |_| {})?;
+            let cpu = process_cpu_seconds() - cpu0;
+            Some((spp, cpu * 1e9 / out.samples.max(1) as f64))
+        }
+    };
+
     let analysis = Instant::now();
     let costs = cost::measure(
         &world,
@@ -490,6 +507,8 @@ pub fn run_scene(
         invalid_samples: out.invalid_samples,
         measured_ns_per_sample: (render_cpu_s - reads_cpu).max(0.0) * 1e9
             / (out.samples.max(1) as f64),
+        mean_render_ns_per_sample: mean_render.map(|m| m.1),
+        mean_render_spp: mean_render.map(|m| m.0),
         trace_ns_per_sample: trace,
         modelled_ns_per_sample: trace + pushes,
         analysis_wall_s: analysis.elapsed().as_secs_f64(),

@@ -134,6 +134,10 @@ pub struct SceneInfo {
     pub invalid_samples: u64,
     /// The render's CPU ns per sample (tracing and every push; reads excluded).
     pub measured_ns_per_sample: f64,
+    /// CPU ns per sample of a render with the mean alone (estimate reads excluded), if made.
+    pub mean_render_ns_per_sample: Option<f64>,
+    /// Spp of that render.
+    pub mean_render_spp: Option<u32>,
     /// Tracing alone, ns per sample (from the cost measurement).
     pub trace_ns_per_sample: f64,
     /// Tracing plus every estimator's push, ns per sample (from the cost measurement).
