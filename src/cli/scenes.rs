@@ -66,18 +66,21 @@ pub fn run(args: &ScenesArgs, memory: MemoryLimit) -> Result<ExitCode> {
         .build()
         .map_err(|e| Error::param("threads", threads, e.to_string()))?;
     let mut log = |line: String| eprintln!("[{:7.1} s] {line}", started.elapsed().as_secs_f64());
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
     let mut results = Vec::new();
-    for scene in &exp.scenes {
+    let mut written = Vec::new();
+    // The report is rewritten after every scene, so a run stopped late keeps what it did.
+    for (i, scene) in exp.scenes.iter().enumerate() {
         let r = pool.install(|| scenes::run_scene(&exp, scene, &references, memory, &mut log))?;
         results.push(r);
+        let info = RunInfo {
+            command: command.clone(),
+            wall_s: started.elapsed().as_secs_f64(),
+            threads: pool.current_num_threads(),
+            pending: exp.scenes[i + 1..].iter().map(|s| s.name.clone()).collect(),
+        };
+        written = pool.install(|| scenes::write_report(&args.out, &exp, &results, &info))?;
     }
-    let command = std::env::args().collect::<Vec<_>>().join(" ");
-    let info = RunInfo {
-        command,
-        wall_s: started.elapsed().as_secs_f64(),
-        threads: pool.current_num_threads(),
-    };
-    let written = pool.install(|| scenes::write_report(&args.out, &exp, &results, &info))?;
     log(format!(
         "wrote {} files to {} in {:.1} s",
         written.len(),

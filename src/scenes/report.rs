@@ -20,6 +20,8 @@ pub struct RunInfo {
     pub wall_s: f64,
     /// Worker threads.
     pub threads: usize,
+    /// Scenes of the experiment not run yet (a report is rewritten after every scene).
+    pub pending: Vec<String>,
 }
 
 /// Writes every table and figure of `results` into `dir`; returns the paths written.
@@ -70,6 +72,7 @@ pub fn write_report(
         "threads": run.threads,
         "command": run.command,
         "wall_s": run.wall_s,
+        "pending_scenes": run.pending,
         "scenes": infos.iter().map(|i| serde_json::json!({
             "scene": i.scene,
             "reference_wall_s": i.reference_wall_s,
@@ -141,6 +144,13 @@ fn summary_md(
             ""
         }
     );
+    if !run.pending.is_empty() {
+        let _ = writeln!(
+            s,
+            "**Partial report**: the run has not done {} yet.\n",
+            run.pending.join(", ")
+        );
+    }
     if !exp.file.description.is_empty() {
         let _ = writeln!(s, "{}\n", exp.file.description.trim());
     }
