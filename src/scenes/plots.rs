@@ -181,8 +181,9 @@ pub fn write_plots(
         legend: legend(plotted, &labels),
         notes: vec![
             "relMSE = mean over pixels and channels of (x − r)² / (r² + 0.01), linear radiance; \
-             lower is better. The mean's line falls as 1/spp; a robust estimator's flattens \
-             where its bias takes over from its variance."
+             lower is better. Where the mean's variance is finite and its rare paths have been \
+             sampled its error falls as 1/spp; a robust estimator's flattens where its bias takes \
+             over from its variance."
                 .into(),
         ],
         cols: grid_cols(panels.len()),
@@ -309,7 +310,8 @@ fn zirr_figure(points: &[ZirrPoint], tag: &str) -> Option<Figure> {
         legend,
         notes: vec![
             "The paper's method (zirr: J grows on demand, κ_min = 1, u = 1) on the 3x3 \
-             neighbourhood, at each scene's largest spp. Larger κ rejects less."
+             neighbourhood, at each scene's largest spp. A buffer's weight is min(1, N / (κ r)): \
+             larger κ down-weights more."
                 .into(),
         ],
         cols: grid_cols(panels.len()),
@@ -685,9 +687,10 @@ fn crops(dir: &Path, results: &[SceneResult], tag: &str) -> Result<PathBuf> {
     let png = draw_tiles(
         &format!("Firefly crops{tag}"),
         &[
-            "Per scene, the window where the mean's display image exceeds the reference's the \
-             most (or the crop the experiment sets), for the reference and each estimator at \
-             the spp shown; exposure 1, clamped, sRGB curve, nearest-neighbour enlargement."
+            "Per scene, the window holding the most firefly pixels of the mean (luminance above \
+             the rule's factor times the reference's plus its floor; or the crop the experiment \
+             sets), for the reference and each estimator at the spp shown; exposure 1, clamped, \
+             sRGB curve, nearest-neighbour enlargement."
                 .into(),
         ],
         &rows,

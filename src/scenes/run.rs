@@ -9,7 +9,7 @@ use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
 use crate::estimators::{Estimator, EstimatorSpec, Extra, luminance};
 use crate::image::Image;
-use crate::image::metrics::{Metrics, display_luma};
+use crate::image::metrics::{FireflyRule, Metrics, display_luma};
 use crate::limits::MemoryLimit;
 use crate::render::film::{self, FilmConfig};
 use crate::render::integrator::radiance;
@@ -191,15 +191,21 @@ fn save_reference(reference: &Reference, exr: &Path) -> Result<()> {
     write_atomic(&sidecar(exr, ".json"), text.as_bytes())
 }
 
-/// The `size x size` window (inside the image) whose display luma exceeds the reference's by
-/// the most, summed over its pixels: where the test image's fireflies are. Display values are
-/// bounded, so a window of many fireflies beats one extreme sample. Returns `[x, y, size]`
-/// (the first such window in row-major order on ties).
+/// The `size x size` window (inside the image) holding the most firefly pixels of `test` by
+/// `rule` (the metrics' definition), ties broken by the positive excess of its display luma
+/// over the reference's: where the test image's fireflies are. A count, not a sum of values,
+/// so that a window of many fireflies beats one extreme sample. Returns `[x, y, size]` (the
+/// first best window in row-major order).
 ///
 /// # Errors
 ///
 /// The images differ in size, or `size` is 0 or larger than a side.
-pub fn firefly_window(test: &Image, reference: &Image, size: usize) -> Result<[u32; 3]> {
+pub fn firefly_window(
+    test: &Image,
+    reference: &Image,
+    size: usize,
+    rule: FireflyRule,
+) -> Result<[u32; 3]> {
     let (w, h) = (test.width(), test.height());
     if (reference.width(), reference.height()) != (w, h) {
         return Err(Error::param(
@@ -215,12 +221,16 @@ pub fn firefly_window(test: &Image, reference: &Image, size: usize) -> Result<[u
             format!("must be in 1..={}", w.min(h)),
         ));
     }
-    // Summed-area table of the positive excess, with a zero row and column in front.
+    // Summed-area table of the score, with a zero row and column in front. The excess is at
+    // most 1 per pixel, so 1e-6 of it never outweighs a firefly in windows under 10^6 pixels.
+    let lum = |p: [f32; 3]| luminance(p.map(f64::from));
     let mut sat = vec![0.0f64; (w + 1) * (h + 1)];
     for y in 0..h {
         let mut row = 0.0;
         for x in 0..w {
-            row += (display_luma(test.get(x, y)) - display_luma(reference.get(x, y))).max(0.0);
+            let (t, r) = (test.get(x, y), reference.get(x, y));
+            let firefly = f64::from(u8::from(rule.is_firefly(lum(t), lum(r))));
+            row += firefly + 1e-6 * (display_luma(t) - display_luma(r)).max(0.0);
             sat[(y + 1) * (w + 1) + x + 1] = sat[y * (w + 1) + x + 1] + row;
         }
     }
@@ -466,9 +476,12 @@ pub fn run_scene(
                 .and_then(|e| image_at(e, crop_spp))
                 .or_else(|| crop_images.first().map(|c| c.1.clone()));
             match probe {
-                Some(img) => {
-                    firefly_window(&img, &ref_image, crop_size(scene.width, scene.height))?
-                }
+                Some(img) => firefly_window(
+                    &img,
+                    &ref_image,
+                    crop_size(scene.width, scene.height),
+                    exp.rule,
+                )?,
                 None => [0, 0, crop_size(scene.width, scene.height) as u32],
             }
         }
@@ -572,10 +585,19 @@ mod tests {
             px[y * 16 + x] = [5.0; 3];
         }
         let test = Image::from_pixels(16, 12, px).unwrap();
-        let [x, y, s] = firefly_window(&test, &reference, 4).unwrap();
+        let rule = FireflyRule::default();
+        let [x, y, s] = firefly_window(&test, &reference, 4, rule).unwrap();
         assert_eq!(s, 4);
         assert!((9..=10).contains(&x) && (5..=7).contains(&y), "{x},{y}");
-        assert!(firefly_window(&test, &reference, 13).is_err());
+        assert!(firefly_window(&test, &reference, 13, rule).is_err());
+        // Without fireflies the display excess decides: a faint glow at (2, 8).
+        let mut px = vec![[0.1f32; 3]; 16 * 12];
+        px[8 * 16 + 2] = [0.2; 3];
+        let glow = Image::from_pixels(16, 12, px).unwrap();
+        assert_eq!(
+            firefly_window(&glow, &reference, 4, rule).unwrap(),
+            [0, 5, 4]
+        );
         assert_eq!(crop_size(128, 128), 42);
         assert_eq!(crop_size(32, 32), 12);
         assert_eq!(crop_size(11, 40), 11);
