@@ -267,6 +267,14 @@ fn a_tiny_quick_run_writes_rows_tables_and_figures_and_reuses_its_reference() {
     for (a, b) in rows.iter().zip(&again) {
         assert_eq!((a.rmse, a.ssim, a.spp), (b.rmse, b.ssim, b.spp));
     }
+    // It traced nothing this time, and still knows what the reference took to trace.
+    let info = std::fs::read_to_string(report.join("scenes.csv")).unwrap();
+    let values: Vec<&str> = info.lines().nth(1).unwrap().split(',').collect();
+    let col = |name: &str| values[head.iter().position(|h| *h == name).unwrap()];
+    assert_eq!(col("reference_wall_s"), "0.0");
+    assert!(col("reference_total_wall_s").parse::<f64>().unwrap() > 0.0);
+    let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
+    assert!(summary.contains("the references took"), "{summary}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

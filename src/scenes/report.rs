@@ -76,6 +76,7 @@ pub fn write_report(
         "scenes": infos.iter().map(|i| serde_json::json!({
             "scene": i.scene,
             "reference_wall_s": i.reference_wall_s,
+            "reference_total_wall_s": i.reference_total_wall_s,
             "render_wall_s": i.render_wall_s,
             "analysis_wall_s": i.analysis_wall_s,
         })).collect::<Vec<_>>(),
@@ -154,9 +155,19 @@ fn summary_md(
     if !exp.file.description.is_empty() {
         let _ = writeln!(s, "{}\n", exp.file.description.trim());
     }
+    let traced_now: f64 = infos.iter().map(|i| i.reference_wall_s).sum();
+    let traced_ever: Option<f64> = infos.iter().map(|i| i.reference_total_wall_s).sum();
+    let from_scratch = match traced_ever {
+        Some(t) => format!(
+            "; the references took {t:.0} s to trace (in this and earlier runs, as their JSON \
+             records), so from scratch the run takes about {:.0} s",
+            run.wall_s - traced_now + t
+        ),
+        None => String::new(),
+    };
     let _ = writeln!(
         s,
-        "`{}` — {:.0} s wall on {} threads, commit {}. Every estimator runs in one render per \
+        "`{}` — {:.0} s wall on {} threads{from_scratch}; commit {}. Every estimator runs in one render per \
          scene and is read at every checkpoint; images are judged against the scene's \
          reference (the mean of its own samples, another seed). Files: `metrics.csv` (one row \
          per scene, estimator and checkpoint), `costs.csv`, `delayed.csv`, `scenes.csv`, \
@@ -170,21 +181,22 @@ fn summary_md(
 
     s.push_str("## Scenes, references and render time\n\n");
     s.push_str(
-        "| scene | size | spp | reference spp | reference rel. SE per pixel (RMS) | of the image mean | \
+        "| scene | size | spp | reference spp | its trace wall s | reference rel. SE per pixel (RMS) | of the image mean | \
          its relMSE floor | render wall s | render CPU s | trace ns/sample | bank ns/sample (model) | \
          render ns/sample (measured) | mean-alone render ns/sample (measured) |\n\
-         |---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+         |---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for i in infos {
         let _ = writeln!(
             s,
-            "| {} | {}x{}{} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.0} | {:.0} | {:.0} | {} |",
+            "| {} | {}x{}{} | {} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.0} | {:.0} | {:.0} | {} |",
             i.scene,
             i.width,
             i.height,
             if i.rfilter_box_override { " (box)" } else { "" },
             i.spp,
             i.reference_spp,
+            opt(i.reference_total_wall_s, |v| format!("{v:.0}")),
             opt(i.reference_pixel_relative_se, |v| format!(
                 "{:.2}%",
                 100.0 * v

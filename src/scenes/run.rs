@@ -78,9 +78,26 @@ pub fn load_world(scene: &Scene) -> Result<World> {
     Ok(World::new(&desc))
 }
 
+/// Wall seconds a reference took to trace.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReferenceTime {
+    /// In this run (0 when the cache had enough samples).
+    pub this_run_s: f64,
+    /// In every run that traced it, as its JSON records (`trace_wall_s`); `None` when a cached
+    /// reference does not say.
+    pub total_s: Option<f64>,
+}
+
+/// The `trace_wall_s` a reference's JSON records, if any.
+fn recorded_trace_time(exr: &Path) -> Option<f64> {
+    let text = std::fs::read_to_string(sidecar(exr, ".json")).ok()?;
+    let json: serde_json::Value = serde_json::from_str(&text).ok()?;
+    json.get("trace_wall_s")?.as_f64()
+}
+
 /// The scene's reference with at least `scene.reference_spp` samples per pixel: read from
 /// `dir` if there, traced further if it has fewer, made otherwise. Returns it and the wall
-/// seconds spent tracing.
+/// seconds spent tracing it.
 ///
 /// # Errors
 ///
@@ -92,7 +109,7 @@ pub fn ensure_reference(
     dir: &Path,
     memory: MemoryLimit,
     log: &mut dyn FnMut(String),
-) -> Result<(Reference, f64)> {
+) -> Result<(Reference, ReferenceTime)> {
     let text =
         std::fs::read_to_string(&scene.file).map_err(|e| Error::io(scene.file.display(), &e))?;
     let key = SceneKey {
@@ -102,6 +119,11 @@ pub fn ensure_reference(
     };
     let exr = reference_path(dir, scene);
     let state = sidecar(&exr, ".state");
+    let earlier = if state.exists() {
+        recorded_trace_time(&exr)
+    } else {
+        Some(0.0)
+    };
     let mut reference = if state.exists() {
         let bytes = std::fs::read(&state).map_err(|e| Error::io(state.display(), &e))?;
         let r = Reference::from_bytes(&bytes, &state.display().to_string())?;
@@ -133,7 +155,13 @@ pub fn ensure_reference(
             scene.name,
             exr.display()
         ));
-        return Ok((reference, 0.0));
+        return Ok((
+            reference,
+            ReferenceTime {
+                this_run_s: 0.0,
+                total_s: earlier,
+            },
+        ));
     }
     let (start, end) = (
         reference.next_start(),
@@ -162,16 +190,26 @@ pub fn ensure_reference(
             started.elapsed().as_secs_f64()
         ));
         if done < end && saved.elapsed() >= SAVE_EVERY {
-            save_reference(&reference, &exr)?;
+            let total = earlier.map(|t| t + started.elapsed().as_secs_f64());
+            save_reference(&reference, &exr, total)?;
             saved = Instant::now();
         }
     }
-    save_reference(&reference, &exr)?;
-    Ok((reference, started.elapsed().as_secs_f64()))
+    let this_run_s = started.elapsed().as_secs_f64();
+    let total_s = earlier.map(|t| t + this_run_s);
+    save_reference(&reference, &exr, total_s)?;
+    Ok((
+        reference,
+        ReferenceTime {
+            this_run_s,
+            total_s,
+        },
+    ))
 }
 
-/// Writes the state (first: what a resume reads), the image and a JSON report.
-fn save_reference(reference: &Reference, exr: &Path) -> Result<()> {
+/// Writes the state (first: what a resume reads), the image and a JSON report with the wall
+/// seconds spent tracing it so far (when known).
+fn save_reference(reference: &Reference, exr: &Path, trace_wall_s: Option<f64>) -> Result<()> {
     write_atomic(&sidecar(exr, ".state"), &reference.to_bytes())?;
     reference.image().write_exr(exr)?;
     let scene = reference.scene();
@@ -186,6 +224,7 @@ fn save_reference(reference: &Reference, exr: &Path) -> Result<()> {
         "spp": reference.spp(),
         "invalid_samples": reference.invalid_samples(),
         "accuracy": reference.accuracy(),
+        "trace_wall_s": trace_wall_s,
     });
     let text = serde_json::to_string_pretty(&report).unwrap_or_default();
     write_atomic(&sidecar(exr, ".json"), text.as_bytes())
@@ -343,7 +382,7 @@ pub fn run_scene(
     log: &mut dyn FnMut(String),
 ) -> Result<SceneResult> {
     let world = load_world(scene)?;
-    let (reference, reference_wall_s) = ensure_reference(scene, &world, references, memory, log)?;
+    let (reference, reference_time) = ensure_reference(scene, &world, references, memory, log)?;
     let accuracy = reference.accuracy();
     let ref_image = reference.image();
     drop(reference);
@@ -511,7 +550,8 @@ pub fn run_scene(
         reference_pixel_relative_se: accuracy.pixel_relative_se_rms,
         reference_image_mean_relative_se: accuracy.image_mean_relative_se,
         reference_expected_relmse: accuracy.expected_relmse,
-        reference_wall_s,
+        reference_wall_s: reference_time.this_run_s,
+        reference_total_wall_s: reference_time.total_s,
         threads: rayon::current_num_threads(),
         render_wall_s,
         render_cpu_s,

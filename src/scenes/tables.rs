@@ -120,6 +120,9 @@ pub struct SceneInfo {
     pub reference_expected_relmse: Option<f64>,
     /// Wall seconds spent tracing the reference in this run (0 when the cache had enough).
     pub reference_wall_s: f64,
+    /// Wall seconds spent tracing the reference in every run that traced it (as its JSON
+    /// records; empty when it does not say).
+    pub reference_total_wall_s: Option<f64>,
     /// Worker threads.
     pub threads: usize,
     /// Wall seconds of the render with every estimator.
