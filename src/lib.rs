@@ -23,6 +23,7 @@ pub mod limits;
 pub mod render;
 pub mod report;
 pub mod samples;
+pub mod scenes;
 
 pub use error::{Error, Result};
 pub use estimators::{Bank, Estimator, EstimatorSpec};

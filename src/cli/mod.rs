@@ -8,6 +8,7 @@ mod merge;
 mod reference;
 mod render;
 mod run;
+mod scenes;
 
 use clap::{Parser, Subcommand};
 use fireflies::Result;
@@ -45,6 +46,8 @@ enum Command {
     Reference(reference::ReferenceArgs),
     /// Image metrics (RMSE, relMSE, PSNR, SSIM, bias, fireflies) of an EXR against a reference.
     Compare(compare::CompareArgs),
+    /// Every estimator on real scenes against references: convergence, the seeds' tables, plots.
+    Scenes(scenes::ScenesArgs),
 }
 
 /// Runs the chosen subcommand; `Err` exits with status 2.
@@ -59,6 +62,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Render(args)) => render::run(&args, memory),
         Some(Command::Reference(args)) => reference::run(&args, memory),
         Some(Command::Compare(args)) => compare::run(&args),
+        Some(Command::Scenes(args)) => scenes::run(&args, memory),
         None => run::run(&run::RunArgs::default(), memory),
     }
 }

@@ -29,7 +29,7 @@ use std::sync::OnceLock;
 /// `font-family`, so a viewer without DejaVu still picks its own sans-serif face.
 pub(crate) const FONT: &str = "sans-serif";
 /// Size of one panel in pixels for the per-distribution figures.
-const PANEL: (u32, u32) = (480, 360);
+pub(crate) const PANEL: (u32, u32) = (480, 360);
 /// Size of one panel of the error-quantile fans, whose grid has a panel per estimator too.
 const FAN_PANEL: (u32, u32) = (400, 300);
 /// Outer margin of a figure, pixels.
@@ -37,15 +37,15 @@ const MARGIN: i32 = 16;
 /// Opacity of a 95% confidence band.
 const CI_ALPHA: f64 = 0.18;
 /// Grey of reference lines (zero, 1/n) and neutral legend swatches.
-const REF_GREY: RGBColor = RGBColor(110, 110, 110);
+pub(crate) const REF_GREY: RGBColor = RGBColor(110, 110, 110);
 /// Grey of grid lines.
 const GRID_GREY: RGBColor = RGBColor(228, 228, 228);
 
 /// Colour of the plain mean, the baseline every robust estimator is judged against.
-const MEAN_COLOUR: RGBColor = RGBColor(40, 40, 40);
+pub(crate) const MEAN_COLOUR: RGBColor = RGBColor(40, 40, 40);
 /// Colours of the other estimators, in order of first appearance in the rows: the Okabe-Ito
 /// colour-blind-safe palette (yellow darkened to read on white), then a few distinct extras.
-const PALETTE: [RGBColor; 10] = [
+pub(crate) const PALETTE: [RGBColor; 10] = [
     RGBColor(0, 114, 178),
     RGBColor(230, 159, 0),
     RGBColor(0, 158, 115),
@@ -76,21 +76,30 @@ pub fn write_plots(dir: &Path, rows: &[Row]) -> Result<Vec<PathBuf>> {
     ];
     let mut written = Vec::new();
     for fig in figures.into_iter().flatten() {
-        let layout = Layout::of(&fig)?;
-        let png = dir.join(format!("{}.png", fig.name));
-        let bytes = render_png(&fig, &layout).map_err(|message| Error::Io {
-            path: png.display().to_string(),
+        written.extend(write_figure(dir, &fig, true)?);
+    }
+    Ok(written)
+}
+
+/// Draws one figure into `dir` as `<name>.png` and, with `svg`, `<name>.svg`; returns the
+/// paths written. Fonts must be registered ([`register_fonts`]).
+pub(crate) fn write_figure(dir: &Path, fig: &Figure, svg: bool) -> Result<Vec<PathBuf>> {
+    let layout = Layout::of(fig)?;
+    let png = dir.join(format!("{}.png", fig.name));
+    let bytes = render_png(fig, &layout).map_err(|message| Error::Io {
+        path: png.display().to_string(),
+        message,
+    })?;
+    write_atomic(&png, &bytes)?;
+    let mut written = vec![png];
+    if svg {
+        let path = dir.join(format!("{}.svg", fig.name));
+        let text = render_svg(fig, &layout).map_err(|message| Error::Io {
+            path: path.display().to_string(),
             message,
         })?;
-        write_atomic(&png, &bytes)?;
-        written.push(png);
-        let svg = dir.join(format!("{}.svg", fig.name));
-        let text = render_svg(&fig, &layout).map_err(|message| Error::Io {
-            path: svg.display().to_string(),
-            message,
-        })?;
-        write_atomic(&svg, text.as_bytes())?;
-        written.push(svg);
+        write_atomic(&path, text.as_bytes())?;
+        written.push(path);
     }
     Ok(written)
 }
@@ -285,23 +294,23 @@ impl<'a> Data<'a> {
 // ---------------------------------------------------------------------------------------------
 
 /// A whole figure: title, shared legend, notes and a grid of panels filled row by row.
-struct Figure {
-    name: &'static str,
-    title: String,
-    legend: Vec<Legend>,
-    notes: Vec<String>,
-    cols: usize,
-    panel: (u32, u32),
-    panels: Vec<Panel>,
+pub(crate) struct Figure {
+    pub(crate) name: &'static str,
+    pub(crate) title: String,
+    pub(crate) legend: Vec<Legend>,
+    pub(crate) notes: Vec<String>,
+    pub(crate) cols: usize,
+    pub(crate) panel: (u32, u32),
+    pub(crate) panels: Vec<Panel>,
 }
 
-struct Legend {
-    label: String,
-    colour: RGBColor,
-    kind: LegendKind,
+pub(crate) struct Legend {
+    pub(crate) label: String,
+    pub(crate) colour: RGBColor,
+    pub(crate) kind: LegendKind,
 }
 
-enum LegendKind {
+pub(crate) enum LegendKind {
     Line,
     Dashed,
     Band(f64),
@@ -309,29 +318,29 @@ enum LegendKind {
     Bar,
 }
 
-struct Panel {
-    title: String,
+pub(crate) struct Panel {
+    pub(crate) title: String,
     /// A remark written in the top left corner of the plotting area.
-    note: Option<String>,
-    x: Axis,
-    y: Axis,
-    marks: Vec<Mark>,
+    pub(crate) note: Option<String>,
+    pub(crate) x: Axis,
+    pub(crate) y: Axis,
+    pub(crate) marks: Vec<Mark>,
 }
 
 #[derive(Clone)]
-struct Axis {
-    label: String,
-    log: bool,
+pub(crate) struct Axis {
+    pub(crate) label: String,
+    pub(crate) log: bool,
     /// Fixed tick positions (the sample counts of an n axis); otherwise chosen from the range.
-    ticks: Option<Vec<f64>>,
+    pub(crate) ticks: Option<Vec<f64>>,
     /// Fixed range; otherwise fitted to the marks.
-    range: Option<(f64, f64)>,
+    pub(crate) range: Option<(f64, f64)>,
     /// Keep zero inside a fitted linear range (bias, rates).
-    include_zero: bool,
+    pub(crate) include_zero: bool,
 }
 
 impl Axis {
-    fn log(label: impl Into<String>) -> Self {
+    pub(crate) fn log(label: impl Into<String>) -> Self {
         Axis {
             label: label.into(),
             log: true,
@@ -341,7 +350,7 @@ impl Axis {
         }
     }
 
-    fn linear(label: impl Into<String>) -> Self {
+    pub(crate) fn linear(label: impl Into<String>) -> Self {
         Axis {
             log: false,
             include_zero: true,
@@ -362,7 +371,7 @@ impl Axis {
     }
 }
 
-enum Mark {
+pub(crate) enum Mark {
     /// A shaded band between `lo` and `hi` over `x`; lower ends below a log axis are pinned to
     /// its floor.
     Band {
@@ -458,7 +467,7 @@ fn series_marks(pts: &[Pt], colour: RGBColor, spread: Spread) -> Vec<Mark> {
 }
 
 /// Columns of a grid of `k` per-distribution panels: at most four, as square as is readable.
-fn grid_cols(k: usize) -> usize {
+pub(crate) fn grid_cols(k: usize) -> usize {
     match k {
         0..=3 => k.max(1),
         4 => 2,
@@ -469,7 +478,7 @@ fn grid_cols(k: usize) -> usize {
 
 /// Bands are drawn first, then lines, then points, so that no band hides a line; estimators
 /// keep their order within each layer.
-fn layered(mut marks: Vec<Mark>) -> Vec<Mark> {
+pub(crate) fn layered(mut marks: Vec<Mark>) -> Vec<Mark> {
     marks.sort_by_key(|m| match m {
         Mark::HLine { .. } => 0,
         Mark::Band { .. } => 1,
@@ -1129,11 +1138,11 @@ impl Ranged for Coord {
 // Rendering
 // ---------------------------------------------------------------------------------------------
 
-fn font(size: f64) -> FontDesc<'static> {
+pub(crate) fn font(size: f64) -> FontDesc<'static> {
     FontDesc::new(FontFamily::Name(FONT), size, FontStyle::Normal)
 }
 
-fn bold(size: f64) -> FontDesc<'static> {
+pub(crate) fn bold(size: f64) -> FontDesc<'static> {
     FontDesc::new(FontFamily::Name(FONT), size, FontStyle::Bold)
 }
 

@@ -1,0 +1,19 @@
+//! The scene experiment (`fireflies scenes`): every estimator on real scenes, read at every
+//! checkpoint of one render and judged against a converged reference, with the seeds' tables
+//! (Buisine et al.'s Tables 1 and 2, Zirr et al.'s Figure 6, Pajot et al.'s Table 4) and
+//! figures built from the rows.
+//!
+//! [`experiment`] reads the TOML schema, [`run`] does one scene (reference, render, metrics,
+//! costs, delayed fractions), [`cost`] measures what estimators cost next to tracing,
+//! [`tables`] turns rows into tables and [`plots`] into figures; [`report`] writes them.
+
+pub mod cost;
+pub mod experiment;
+pub mod plots;
+pub mod report;
+pub mod run;
+pub mod tables;
+
+pub use experiment::{Scene, ScenesExperiment};
+pub use report::{RunInfo, write_report};
+pub use run::{SceneResult, run_scene};
