@@ -607,7 +607,7 @@ fn bias_maps(dir: &Path, r: &SceneResult, tag: &str) -> Result<PathBuf> {
         .copied()
         .filter(|v| *v > 0.0)
         .unwrap_or(1.0);
-    let scale = (300 / w.max(1)).max(1);
+    let scale = (360 / w.max(1)).max(1);
     let mut tiles = vec![Tile::from_image(
         "reference".into(),
         &r.reference,
