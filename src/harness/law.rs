@@ -40,29 +40,38 @@ pub struct GrandMeanNull {
 }
 
 /// The threshold `t` that `samples` draws exceed (`S >= t`) about `count` times: the smallest
-/// `t` (to 1e-12 in `ln t`) with `samples P(S >= t) <= count`, found by bisection on `ln t`.
+/// `t` (to about 1e-12 in `ln t`) with `samples P(S >= t) <= count`, by a fixed number of
+/// bisection steps on `ln t` within 30 decades of the mean (so laws at 1e300 or 1e-300, whose
+/// bracket would overflow or underflow as plain numbers, are handled and the search ends).
 pub fn threshold_for_count(dist: &Dist, samples: f64, count: f64) -> f64 {
     let mu = dist.mean();
     let (low_support, high_support) = dist.support();
-    let expected = |t: f64| samples * dist.mass_from(t);
-    let mut lo = (mu * 1e-30).max(low_support);
-    let mut hi = (mu * 1e30).min(high_support);
+    let expected = |ln_t: f64| samples * dist.mass_from(ln_t.exp());
+    let span = 30.0 * std::f64::consts::LN_10;
+    let mut lo = mu.ln() - span;
+    let mut hi = mu.ln() + span;
+    if low_support > 0.0 {
+        lo = lo.max(low_support.ln());
+    }
+    if high_support.is_finite() {
+        hi = hi.min(high_support.ln());
+    }
     if expected(lo) <= count {
-        return lo;
+        return lo.exp();
     }
     if expected(hi) > count {
         // Only the top of a bounded support (an atom) is that frequent: nothing lies above it.
-        return hi * (1.0 + 1e-12);
+        return hi.exp() * (1.0 + 1e-12);
     }
-    while (hi / lo).ln() > 1e-12 {
-        let mid = (lo * hi).sqrt();
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
         if expected(mid) <= count {
             hi = mid;
         } else {
             lo = mid;
         }
     }
-    hi
+    hi.exp()
 }
 
 impl GrandMeanNull {
@@ -272,6 +281,18 @@ pub fn caveat(
 mod tests {
     use super::*;
     use crate::dist::{LogNormal, preset};
+
+    #[test]
+    fn threshold_search_ends_at_extreme_scales() {
+        for mu in [-690.0, 690.0] {
+            let d: Dist = LogNormal::new(mu, 1.0).unwrap().into();
+            let t = threshold_for_count(&d, 1e6, 10.0);
+            assert!(
+                t > 0.0 && (1e6 * d.mass_from(t) / 10.0 - 1.0).abs() < 1e-6,
+                "{mu}: {t}"
+            );
+        }
+    }
 
     #[test]
     fn threshold_matches_the_tail_it_was_asked_for() {
