@@ -127,17 +127,35 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
                             ),
                             null.p_two_sided(bias),
                         ),
-                        // A law without spread: the mean is exact up to rounding.
-                        None => (
-                            format!(
-                                "relative bias {bias:.3e} on a law without spread (tolerance {ROUNDING_TOLERANCE:.1e})"
+                        None => match dist.dist.relative_variance() {
+                            // A law without spread: the mean is exact up to rounding.
+                            Some(v) if v == 0.0 => (
+                                format!(
+                                    "relative bias {bias:.3e} on a law without spread (tolerance {ROUNDING_TOLERANCE:.1e})"
+                                ),
+                                if bias.abs() <= ROUNDING_TOLERANCE {
+                                    1.0
+                                } else {
+                                    0.0
+                                },
                             ),
-                            if bias.abs() <= ROUNDING_TOLERANCE {
-                                1.0
-                            } else {
-                                0.0
-                            },
-                        ),
+                            // No null at this scale: the exact standard error, normal theory.
+                            Some(v) => {
+                                let se = (v / (n as f64 * t as f64)).sqrt();
+                                (
+                                    format!(
+                                        "relative bias {bias:.3e}, exact SE {se:.3e} (normal theory: no null at this scale)"
+                                    ),
+                                    (2.0 * normal_sf((bias / se).abs())).min(1.0),
+                                )
+                            }
+                            None => (
+                                format!(
+                                    "relative bias {bias:.3e}; infinite variance and no null at this scale"
+                                ),
+                                1.0,
+                            ),
+                        },
                     };
                     push(
                         CheckKind::Unbiased,

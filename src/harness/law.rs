@@ -169,7 +169,8 @@ pub struct MeanLaw {
     pub trials: u64,
     /// `Var[mean of n] / mu^2`, `None` when infinite.
     pub relative_variance: Option<f64>,
-    /// The null of the grand mean; `None` for a law without spread.
+    /// The null of the grand mean; `None` for a law without spread, or at a scale beyond
+    /// 1e±150.
     pub null: Option<GrandMeanNull>,
     /// The share of the trial mean's second and fourth moments carried by samples the run
     /// expects fewer than [`TAIL_EVENTS`] times.
@@ -199,7 +200,11 @@ impl MeanLaw {
         MeanLaw {
             trials,
             relative_variance: rel_var.map(|v| v / nf),
-            null: spread.then(|| GrandMeanNull::new(dist, samples, seed)),
+            // The body's moments are taken in the law's own units: at scales beyond 1e±150
+            // their squares under- or overflow, and the null is left out (the check falls back
+            // to the exact standard error).
+            null: (spread && (1e-150..1e150).contains(&mu))
+                .then(|| GrandMeanNull::new(dist, samples, seed)),
             dominance: [share2, share4],
         }
     }
