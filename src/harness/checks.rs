@@ -129,7 +129,7 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
                         ),
                         None => match dist.dist.relative_variance() {
                             // A law without spread: the mean is exact up to rounding.
-                            Some(v) if v == 0.0 => (
+                            Some(0.0) => (
                                 format!(
                                     "relative bias {bias:.3e} on a law without spread (tolerance {ROUNDING_TOLERANCE:.1e})"
                                 ),
