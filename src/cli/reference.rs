@@ -7,9 +7,9 @@ use super::render::FilterOverride;
 use clap::Args;
 use fireflies::limits::{self, MemoryLimit};
 use fireflies::render::mitsuba;
-use fireflies::render::reference::{REFERENCE_SEED, Reference, SceneKey, scene_hash};
+use fireflies::render::reference::{REFERENCE_SEED, Reference, SceneKey, scene_hash, sidecar};
 use fireflies::render::world::World;
-use fireflies::report::{tables::git_commit, write_atomic};
+use fireflies::report::tables::git_commit;
 use fireflies::{Error, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::ffi::OsString;
@@ -54,13 +54,6 @@ pub struct ReferenceArgs {
     rfilter: Option<FilterOverride>,
 }
 
-/// `path` with `suffix` appended to its file name (`ref.exr` -> `ref.exr.state`).
-fn sidecar(path: &Path, suffix: &str) -> PathBuf {
-    let mut name: OsString = path.file_name().unwrap_or_default().to_os_string();
-    name.push(suffix);
-    path.with_file_name(name)
-}
-
 /// Fails early when `out` cannot be written: creates its folder and a file beside it.
 fn check_writable(out: &Path) -> Result<()> {
     let name = out.file_name().ok_or_else(|| Error::Io {
@@ -91,29 +84,18 @@ fn check_writable(out: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Writes the state (what a resume reads, first), the image and the report.
+/// Writes the reference's files, with this command's run and build in its report.
 fn save(reference: &Reference, out: &Path, run: &serde_json::Value) -> Result<()> {
-    write_atomic(&sidecar(out, ".state"), &reference.to_bytes())?;
-    reference.image().write_exr(out)?;
-    let scene = reference.scene();
-    let report = serde_json::json!({
-        "scene": scene.path,
-        "scene_hash": scene.hash,
-        "rfilter_box_override": scene.box_filter,
-        "width": reference.width(),
-        "height": reference.height(),
-        "seed": reference.seed(),
-        "sample_ranges": reference.ranges(),
-        "spp": reference.spp(),
-        "invalid_samples": reference.invalid_samples(),
-        "accuracy": reference.accuracy(),
-        "image": out.file_name().map(|n| n.to_string_lossy().to_string()),
-        "state": sidecar(out, ".state").file_name().map(|n| n.to_string_lossy().to_string()),
-        "last_run": run,
-        "git_commit": git_commit(),
-    });
-    let text = serde_json::to_string_pretty(&report).unwrap_or_default();
-    write_atomic(&sidecar(out, ".json"), text.as_bytes())
+    let mut extra = serde_json::Map::new();
+    let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().to_string());
+    extra.insert("image".into(), serde_json::json!(name(out)));
+    extra.insert(
+        "state".into(),
+        serde_json::json!(name(&sidecar(out, ".state"))),
+    );
+    extra.insert("last_run".into(), run.clone());
+    extra.insert("git_commit".into(), serde_json::json!(git_commit()));
+    reference.save(out, extra)
 }
 
 pub fn run(args: &ReferenceArgs, memory: MemoryLimit) -> Result<ExitCode> {

@@ -33,6 +33,7 @@ use crate::limits::MemoryLimit;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
+use std::path::{Path, PathBuf};
 
 /// Default seed of a reference's streams: the ASCII bytes of `fireflyR`, far from the small
 /// seeds renders use.
@@ -195,7 +196,44 @@ pub struct Reference {
     pixels: Vec<PixelStats>,
 }
 
+/// The file beside a reference's EXR that holds `suffix` (`ref.exr` -> `ref.exr.state`,
+/// `ref.exr.json`).
+pub fn sidecar(exr: &Path, suffix: &str) -> PathBuf {
+    let mut name = exr.file_name().unwrap_or_default().to_os_string();
+    name.push(suffix);
+    exr.with_file_name(name)
+}
+
 impl Reference {
+    /// Writes the state (first: it is what a resume reads), the image, and `exr.json` with
+    /// what the reference is and how accurate it is, plus the caller's `extra` fields.
+    pub fn save(
+        &self,
+        exr: &Path,
+        extra: serde_json::Map<String, serde_json::Value>,
+    ) -> Result<()> {
+        crate::atomic::write_atomic(&sidecar(exr, ".state"), &self.to_bytes())?;
+        self.image().write_exr(exr)?;
+        let scene = self.scene();
+        let mut report = serde_json::json!({
+            "scene": scene.path,
+            "scene_hash": scene.hash,
+            "rfilter_box_override": scene.box_filter,
+            "width": self.width(),
+            "height": self.height(),
+            "seed": self.seed(),
+            "sample_ranges": self.ranges(),
+            "spp": self.spp(),
+            "invalid_samples": self.invalid_samples(),
+            "accuracy": self.accuracy(),
+        });
+        if let Some(fields) = report.as_object_mut() {
+            fields.extend(extra);
+        }
+        let text = serde_json::to_string_pretty(&report).unwrap_or_default();
+        crate::atomic::write_atomic(&sidecar(exr, ".json"), text.as_bytes())
+    }
+
     /// An empty reference of a `width × height` image.
     ///
     /// # Errors

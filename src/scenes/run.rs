@@ -5,7 +5,6 @@
 use super::cost::{self, CostReport, process_cpu_seconds};
 use super::experiment::{Scene, ScenesExperiment};
 use super::tables::{CostRow, DelayedRow, MetricRow, SceneInfo, label};
-use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
 use crate::estimators::{Estimator, EstimatorSpec, Extra, luminance};
 use crate::image::Image;
@@ -14,7 +13,7 @@ use crate::limits::MemoryLimit;
 use crate::render::film::{self, FilmConfig};
 use crate::render::integrator::radiance;
 use crate::render::mitsuba;
-use crate::render::reference::{REFERENCE_SEED, Reference, SceneKey, scene_hash};
+use crate::render::reference::{REFERENCE_SEED, Reference, SceneKey, scene_hash, sidecar};
 use crate::render::sampler::SampleStream;
 use crate::render::world::World;
 use rayon::prelude::*;
@@ -57,12 +56,6 @@ pub fn reference_path(dir: &Path, scene: &Scene) -> PathBuf {
         "{}-{}x{}.exr",
         scene.name, scene.width, scene.height
     ))
-}
-
-fn sidecar(path: &Path, suffix: &str) -> PathBuf {
-    let mut name = path.file_name().unwrap_or_default().to_os_string();
-    name.push(suffix);
-    path.with_file_name(name)
 }
 
 /// Loads the scene at the experiment's size.
@@ -207,27 +200,11 @@ pub fn ensure_reference(
     ))
 }
 
-/// Writes the state (first: what a resume reads), the image and a JSON report with the wall
-/// seconds spent tracing it so far (when known).
+/// Writes the reference's files, with the wall seconds spent tracing it so far (when known).
 fn save_reference(reference: &Reference, exr: &Path, trace_wall_s: Option<f64>) -> Result<()> {
-    write_atomic(&sidecar(exr, ".state"), &reference.to_bytes())?;
-    reference.image().write_exr(exr)?;
-    let scene = reference.scene();
-    let report = serde_json::json!({
-        "scene": scene.path,
-        "scene_hash": scene.hash,
-        "rfilter_box_override": scene.box_filter,
-        "width": reference.width(),
-        "height": reference.height(),
-        "seed": reference.seed(),
-        "sample_ranges": reference.ranges(),
-        "spp": reference.spp(),
-        "invalid_samples": reference.invalid_samples(),
-        "accuracy": reference.accuracy(),
-        "trace_wall_s": trace_wall_s,
-    });
-    let text = serde_json::to_string_pretty(&report).unwrap_or_default();
-    write_atomic(&sidecar(exr, ".json"), text.as_bytes())
+    let mut extra = serde_json::Map::new();
+    extra.insert("trace_wall_s".into(), serde_json::json!(trace_wall_s));
+    reference.save(exr, extra)
 }
 
 /// The `size x size` window (inside the image) holding the most firefly pixels of `test` by
