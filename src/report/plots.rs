@@ -1226,6 +1226,20 @@ impl Layout {
 type DrawResult<DB> =
     std::result::Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
 
+/// PNG bytes of an RGB8 buffer `w` pixels wide and `h` high.
+pub(crate) fn encode_png(rgb: &[u8], w: u32, h: u32) -> std::result::Result<Vec<u8>, String> {
+    let mut png = Vec::new();
+    image::ImageEncoder::write_image(
+        image::codecs::png::PngEncoder::new(&mut png),
+        rgb,
+        w,
+        h,
+        image::ExtendedColorType::Rgb8,
+    )
+    .map_err(|e| e.to_string())?;
+    Ok(png)
+}
+
 fn render_png(fig: &Figure, layout: &Layout) -> std::result::Result<Vec<u8>, String> {
     let (w, h) = layout.size;
     let mut buf = vec![0u8; w as usize * h as usize * 3];
@@ -1234,16 +1248,7 @@ fn render_png(fig: &Figure, layout: &Layout) -> std::result::Result<Vec<u8>, Str
         draw_figure(&root, fig, layout).map_err(|e| e.to_string())?;
         root.present().map_err(|e| e.to_string())?;
     }
-    let mut png = Vec::new();
-    image::ImageEncoder::write_image(
-        image::codecs::png::PngEncoder::new(&mut png),
-        &buf,
-        w,
-        h,
-        image::ExtendedColorType::Rgb8,
-    )
-    .map_err(|e| e.to_string())?;
-    Ok(png)
+    encode_png(&buf, w, h)
 }
 
 fn render_svg(fig: &Figure, layout: &Layout) -> std::result::Result<String, String> {

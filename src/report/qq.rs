@@ -84,16 +84,7 @@ fn render(
         draw(&root, points, title, notes).map_err(|e| e.to_string())?;
         root.present().map_err(|e| e.to_string())?;
     }
-    let mut png = Vec::new();
-    image::ImageEncoder::write_image(
-        image::codecs::png::PngEncoder::new(&mut png),
-        &buf,
-        w,
-        h,
-        image::ExtendedColorType::Rgb8,
-    )
-    .map_err(|e| e.to_string())?;
-    Ok(png)
+    crate::report::plots::encode_png(&buf, w, h)
 }
 
 /// A log axis over `lo..hi` with the report plots' ticks.

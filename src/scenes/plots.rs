@@ -567,16 +567,7 @@ fn draw_tiles(
         }
         root.present().map_err(e)?;
     }
-    let mut png = Vec::new();
-    image::ImageEncoder::write_image(
-        image::codecs::png::PngEncoder::new(&mut png),
-        &buf,
-        w,
-        h,
-        image::ExtendedColorType::Rgb8,
-    )
-    .map_err(|e| e.to_string())?;
-    Ok(png)
+    crate::report::plots::encode_png(&buf, w, h)
 }
 
 /// The luminance difference `L(x) − L(r)` per pixel.
