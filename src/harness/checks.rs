@@ -23,6 +23,7 @@
 
 use super::claims::{CheckKind, ROUNDING_TOLERANCE};
 use super::experiment::Experiment;
+use super::law::GrandMeanNull;
 use super::runner::RunOutput;
 use crate::estimators::EstimatorSpec;
 use serde::Serialize;
@@ -116,54 +117,17 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
                 let moments = cell.relative_estimate_moments();
                 if let (EstimatorSpec::Mean, true) = (spec, cfg.unbiased_mean) {
                     let bias = moments.mean() - 1.0;
-                    let (observed, p_value) = match d.mean_laws[i]
-                        .as_ref()
-                        .and_then(|l| l.null.as_ref())
-                    {
-                        Some(null) => (
-                            format!(
-                                "relative bias {bias:.3e}; the law's null of the grand mean of {} samples",
-                                t * n as u64
-                            ),
-                            null.p_two_sided(bias),
-                        ),
-                        None => match dist.dist.relative_variance() {
-                            // A law without spread: the mean is exact up to rounding.
-                            Some(0.0) => (
-                                format!(
-                                    "relative bias {bias:.3e} on a law without spread (tolerance {ROUNDING_TOLERANCE:.1e})"
-                                ),
-                                if bias.abs() <= ROUNDING_TOLERANCE {
-                                    1.0
-                                } else {
-                                    0.0
-                                },
-                            ),
-                            // No null at this scale: the exact standard error, normal theory.
-                            Some(v) => {
-                                let se = (v / (n as f64 * t as f64)).sqrt();
-                                (
-                                    format!(
-                                        "relative bias {bias:.3e}, exact SE {se:.3e} (normal theory: no null at this scale)"
-                                    ),
-                                    (2.0 * normal_sf((bias / se).abs())).min(1.0),
-                                )
-                            }
-                            None => (
-                                format!(
-                                    "relative bias {bias:.3e}; infinite variance and no null at this scale"
-                                ),
-                                1.0,
-                            ),
-                        },
-                    };
-                    push(
-                        CheckKind::Unbiased,
-                        "E[mean] = mu".into(),
-                        observed,
-                        p_value,
-                        None,
-                    );
+                    let null = d.mean_laws[i].as_ref().and_then(|l| l.null.as_ref());
+                    let rel_var = dist.dist.relative_variance();
+                    if let Some((observed, p_value)) = unbiased(bias, null, rel_var, n as u64 * t) {
+                        push(
+                            CheckKind::Unbiased,
+                            "E[mean] = mu".into(),
+                            observed,
+                            p_value,
+                            None,
+                        );
+                    }
                 }
                 if let Some((threshold, exceed)) = cell.exceedances() {
                     let (check, bound) = match spec {
@@ -244,6 +208,46 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
     }
     holm(&mut results, cfg.family_alpha);
     results
+}
+
+/// The unbiasedness verdict on the grand mean of `samples` draws with relative bias `bias`:
+/// from the law's null when there is one; against a rounding tolerance on a law without
+/// spread; with the exact standard error (normal theory) where the null is left out (laws
+/// beyond 1e±150); none when the variance is infinite and there is no null.
+fn unbiased(
+    bias: f64,
+    null: Option<&GrandMeanNull>,
+    relative_variance: Option<f64>,
+    samples: u64,
+) -> Option<(String, f64)> {
+    Some(match (null, relative_variance) {
+        (Some(null), _) => (
+            format!(
+                "relative bias {bias:.3e}; the law's null of the grand mean of {samples} samples"
+            ),
+            null.p_two_sided(bias),
+        ),
+        (None, Some(0.0)) => (
+            format!(
+                "relative bias {bias:.3e} on a law without spread (tolerance {ROUNDING_TOLERANCE:.1e})"
+            ),
+            if bias.abs() <= ROUNDING_TOLERANCE {
+                1.0
+            } else {
+                0.0
+            },
+        ),
+        (None, Some(v)) => {
+            let se = (v / samples as f64).sqrt();
+            (
+                format!(
+                    "relative bias {bias:.3e}, exact SE {se:.3e} (normal theory: no null at this scale)"
+                ),
+                (2.0 * normal_sf((bias / se).abs())).min(1.0),
+            )
+        }
+        (None, None) => return None,
+    })
 }
 
 /// The smallest exceedance rate whose expected count the one-sided binomial test against
