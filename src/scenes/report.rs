@@ -236,14 +236,7 @@ fn summary_md(
          render with it alone (CPU ns per sample in brackets); the last row is the whole bank \
          `Σ push / (trace + Σ push)`.\n\n| estimator |",
     );
-    for sc in &scenes {
-        let _ = write!(s, " {sc} |");
-    }
-    s.push_str("\n|---|");
-    for _ in &scenes {
-        s.push_str("---:|");
-    }
-    s.push('\n');
+    scene_columns(&mut s, &scenes, "---:|");
     for (e, label) in &ests {
         let _ = write!(s, "| {label} |");
         for sc in &scenes {
@@ -301,14 +294,7 @@ fn summary_md(
             .join(" / ")
     );
     s.push_str("| estimator |");
-    for sc in &scenes {
-        let _ = write!(s, " {sc} |");
-    }
-    s.push_str("\n|---|");
-    for _ in &scenes {
-        s.push_str("---:|");
-    }
-    s.push('\n');
+    scene_columns(&mut s, &scenes, "---:|");
     for (e, label) in &ests {
         let _ = write!(s, "| {label} |");
         for sc in &scenes {
@@ -404,14 +390,7 @@ fn summary_md(
 
     s.push_str("## Every estimator at the largest spp: SSIM and relMSE, ranked per scene\n\n");
     s.push_str("Each cell: SSIM (rank) · relMSE (rank) · relative mean bias.\n\n| estimator |");
-    for sc in &scenes {
-        let _ = write!(s, " {sc} |");
-    }
-    s.push_str("\n|---|");
-    for _ in &scenes {
-        s.push_str("---|");
-    }
-    s.push('\n');
+    scene_columns(&mut s, &scenes, "---|");
     for (e, label) in &ests {
         let _ = write!(s, "| {label} |");
         for sc in &scenes {
@@ -441,4 +420,17 @@ fn summary_md(
          - `crops.png`: the firefly crops side by side.\n",
     );
     s
+}
+
+/// The rest of a table's header: one column per scene, then the separator row with `align`
+/// (`---|` or `---:|`) under each.
+fn scene_columns(s: &mut String, scenes: &[&str], align: &str) {
+    for sc in scenes {
+        let _ = write!(s, " {sc} |");
+    }
+    s.push_str("\n|---|");
+    for _ in scenes {
+        s.push_str(align);
+    }
+    s.push('\n');
 }
