@@ -143,8 +143,10 @@ fn estimator_state_counts_against_the_memory_limit() {
     refused(&render("lots"), &["max-memory", "lots"]);
 }
 
-/// Item 4: a trillion trials (every block's statistics are kept until the fold) and a
-/// checkpoint of 1e10 samples (80 GB per worker) aborted on allocation.
+/// Item 4: a trillion trials and a checkpoint of 1e10 samples (80 GB per worker) aborted on
+/// allocation. A single run now folds its blocks as they finish, so its memory no longer grows
+/// with the trials (it would simply run for days); a shard still keeps every block's
+/// statistics until the merge, so a trillion trials in one shard must be refused.
 #[test]
 fn runs_that_cannot_fit_are_refused_naming_the_parameter() {
     let dir = scratch("runs");
@@ -152,7 +154,11 @@ fn runs_that_cannot_fit_are_refused_naming_the_parameter() {
         &dir.join("small.toml"),
         &experiment("small", "[4, 16]", "[\"mean\"]"),
     );
-    let out = with_out(&dir, &["run", "--trials", "1000000000000"], &small);
+    let out = with_out(
+        &dir,
+        &["run", "--trials", "1000000000000", "--shard", "0/1"],
+        &small,
+    );
     refused(&out, &["trials = 1000000000000", "--max-memory"]);
     let big = write(
         &dir.join("big.toml"),
