@@ -27,6 +27,7 @@ fn snapshot(exp: &Experiment, build: Option<runner::BuildFn>) -> Snapshot {
     Snapshot {
         identity: Identity::of(exp, out.trials),
         rows: tables::rows(exp, &out),
+        exact: gate::exact_tests(&harness::checks::evaluate(exp, &out)),
     }
 }
 

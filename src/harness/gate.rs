@@ -16,6 +16,8 @@
 //! listed as not gated.
 
 use super::Experiment;
+use super::checks::CheckResult;
+use super::claims::CheckKind;
 use super::metrics::{Caveat, Metric, Row};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -511,6 +513,73 @@ pub struct Snapshot {
     pub identity: Identity,
     /// Its rows (`results.csv`).
     pub rows: Vec<Row>,
+    /// Exact tests of the run against the truth that replace a comparison with the baseline
+    /// (see [`exact_tests`]); empty for a baseline.
+    pub exact: ExactTests,
+}
+
+/// p-values of exact tests against the truth, by gated key.
+pub type ExactTests = BTreeMap<Key, f64>;
+
+/// The plain mean's relative bias is tested against its truth, 0, with the `unbiased` check's
+/// p-value (the law's own null of the grand mean, `checks.json`) instead of a normal z-test
+/// against the baseline: on an infinite-variance law such as `firefly` one rare giant sample
+/// moves the grand mean far more often than a normal law allows (2 false alarms in 80 seeds,
+/// where Holm promised at most 1%). The mean has no practical margin: any bias is a defect.
+///
+/// Reads the run's `checks.json`; a report without one (written before the file existed) has
+/// no exact tests, and its mean is compared with the baseline like every other row.
+///
+/// # Errors
+/// When the file exists but cannot be read or is not a list of checks.
+pub fn read_exact_tests(path: &Path) -> Result<ExactTests> {
+    #[derive(Deserialize)]
+    struct Check {
+        check: String,
+        distribution: String,
+        estimator: String,
+        n: usize,
+        p_value: Option<f64>,
+    }
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(ExactTests::new()),
+        Err(e) => return Err(Error::io(path.display(), &e)),
+    };
+    let checks: Vec<Check> = serde_json::from_str(&text).map_err(|e| Error::Io {
+        path: path.display().to_string(),
+        message: format!("not a list of checks: {e}"),
+    })?;
+    Ok(checks
+        .into_iter()
+        .filter_map(|c| {
+            // A NaN p-value is written as null: that comparison stays with the baseline's.
+            exact_entry(&c.check, c.distribution, c.estimator, c.n, c.p_value?)
+        })
+        .collect())
+}
+
+/// [`read_exact_tests`] from checks in memory.
+pub fn exact_tests(checks: &[CheckResult]) -> ExactTests {
+    checks
+        .iter()
+        .filter_map(|c| {
+            let (d, e) = (c.distribution.clone(), c.estimator.clone());
+            exact_entry(c.check.name(), d, e, c.n, c.p_value)
+        })
+        .collect()
+}
+
+/// The gated key an `unbiased` check of the plain mean replaces, with its p-value.
+fn exact_entry(
+    check: &str,
+    distribution: String,
+    estimator: String,
+    n: usize,
+    p: f64,
+) -> Option<(Key, f64)> {
+    (check == CheckKind::Unbiased.name() && estimator == "mean" && !p.is_nan())
+        .then(|| ((distribution, estimator, n, Metric::RelativeBias), p))
 }
 
 impl Snapshot {
@@ -579,7 +648,11 @@ impl Snapshot {
             .enumerate()
             .map(|(i, row)| row.map_err(|e| at(header_lines + i + 2, e.to_string())))
             .collect::<Result<Vec<Row>>>()?;
-        Ok(Snapshot { identity, rows })
+        Ok(Snapshot {
+            identity,
+            rows,
+            exact: ExactTests::new(),
+        })
     }
 
     /// [`Snapshot::parse`] of a file.
@@ -759,7 +832,13 @@ pub fn incomplete(snapshot: &Snapshot, cfg: &GateConfig) -> Vec<Problem> {
 /// Compares a run with the baseline: identities, completeness of both tables against the
 /// experiment's cells, then every gated metric ([`compare`]).
 pub fn gate(baseline: &Snapshot, now: &Snapshot, cfg: &GateConfig) -> Outcome {
-    let mut out = compare_expected(&baseline.rows, &now.rows, &now.identity.expected(cfg), cfg);
+    let mut out = compare_expected(
+        &baseline.rows,
+        &now.rows,
+        &now.identity.expected(cfg),
+        &now.exact,
+        cfg,
+    );
     let mut problems = baseline.identity.differences(&now.identity);
     problems.append(&mut out.problems);
     out.problems = problems;
@@ -776,7 +855,7 @@ pub fn compare(baseline: &[Row], now: &[Row], cfg: &GateConfig) -> Outcome {
         .filter(|r| rule(r.metric, cfg).is_some())
         .map(key)
         .collect();
-    compare_expected(baseline, now, &keys, cfg)
+    compare_expected(baseline, now, &keys, &ExactTests::new(), cfg)
 }
 
 /// [`compare`], where both tables must hold exactly the gated rows `expected`.
@@ -784,6 +863,7 @@ fn compare_expected(
     baseline: &[Row],
     now: &[Row],
     expected: &BTreeSet<Key>,
+    exact: &ExactTests,
     cfg: &GateConfig,
 ) -> Outcome {
     let mut problems = Vec::new();
@@ -835,6 +915,15 @@ fn compare_expected(
         };
         if let Some(caveat) = b.caveat.or(r.caveat) {
             c.verdict = Verdict::NotGated(caveat);
+            out.push(c);
+            spreads.push(Vec::new());
+            continue;
+        }
+        if let Some(&p) = exact.get(k) {
+            // Two-sided against the truth; z is its normal equivalent, for the table.
+            c.margin = 0.0;
+            c.z = Some(std.inverse_cdf(1.0 - p / 2.0));
+            c.p_value = Some(p);
             out.push(c);
             spreads.push(Vec::new());
             continue;
@@ -1074,6 +1163,67 @@ mod tests {
         assert_eq!(one(rate(432), rate(540), &cfg).verdict, Verdict::Ok);
     }
 
+    /// The plain mean's relative bias takes the `unbiased` check's exact p-value: a jump that
+    /// the normal comparison calls a regression (z = 20) is not one when the law's null says
+    /// it is common (p = 0.3), and it stays one when the null rejects it too (p = 1e-9). Only
+    /// the `unbiased` check of the plain mean is read as an exact test.
+    #[test]
+    fn the_means_bias_is_tested_exactly_against_the_truth() {
+        let cfg = GateConfig::default();
+        let (base, now) = (
+            row(Metric::RelativeBias, 0.0, 0.001),
+            row(Metric::RelativeBias, 0.03, 0.001),
+        );
+        let run = |p: f64| {
+            let exact: ExactTests = [(key(&now), p)].into();
+            let keys: BTreeSet<Key> = [key(&now)].into();
+            compare_expected(&[base.clone()], &[now.clone()], &keys, &exact, &cfg).comparisons[0]
+                .clone()
+        };
+        let common = run(0.3);
+        assert_eq!(
+            (common.verdict, common.p_value, common.margin),
+            (Verdict::Ok, Some(0.3), 0.0)
+        );
+        assert!((common.z.unwrap() - 1.036).abs() < 1e-3, "{:?}", common.z);
+        assert_eq!(run(1e-9).verdict, Verdict::Regression);
+        assert_eq!(
+            compare(&[base.clone()], &[now.clone()], &cfg).comparisons[0].verdict,
+            Verdict::Regression
+        );
+        // The check's p-values are read from checks.json: only `unbiased` of `mean` counts.
+        let dir = std::env::temp_dir().join(format!("fireflies-exact-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("checks.json");
+        std::fs::write(
+            &path,
+            r#"[{"check":"unbiased","distribution":"glossy","estimator":"mean","n":16,"p_value":0.25},
+                {"check":"unbiased","distribution":"glossy","estimator":"mean","n":64,"p_value":null},
+                {"check":"unbiased","distribution":"glossy","estimator":"clamp:c=10","n":16,"p_value":0.5},
+                {"check":"chebyshev","distribution":"glossy","estimator":"mean","n":16,"p_value":0.5}]"#,
+        )
+        .unwrap();
+        let read = read_exact_tests(&path).unwrap();
+        let want: ExactTests = [(
+            ("glossy".into(), "mean".into(), 16, Metric::RelativeBias),
+            0.25,
+        )]
+        .into();
+        assert_eq!(read, want);
+        assert!(
+            read_exact_tests(&dir.join("missing.json"))
+                .unwrap()
+                .is_empty()
+        );
+        std::fs::write(&path, "{").unwrap();
+        let e = read_exact_tests(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("checks.json") && e.contains("not a list of checks"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn holm_orders_by_p_and_stops_at_the_first_acceptance() {
         let cfg = GateConfig {
@@ -1239,6 +1389,7 @@ mod tests {
         let snap = Snapshot {
             identity: id.clone(),
             rows,
+            exact: ExactTests::new(),
         };
         let bytes = snap.to_csv().unwrap();
         let text = String::from_utf8(bytes).unwrap();

@@ -258,27 +258,32 @@ impl LogHistogram {
     }
 
     /// The share of `sum |x - centre|^power` that the `k` values farthest from `centre`
-    /// carry, each of them taken at its bin's far edge and the rest at their bins' centres (so
-    /// the share errs high); 1 when every value sits at `centre` (the run saw no spread at
-    /// all). Whether a moment of this run rests on a handful of observations.
+    /// carry; see [`Self::top_share_by`].
     pub fn top_share(&self, centre: f64, k: u64, power: i32) -> f64 {
-        // (farthest deviation, typical deviation, count) of every atom and bin.
-        let mut groups: Vec<(f64, f64, u64)> = vec![
-            ((0.0 - centre).abs(), (0.0 - centre).abs(), self.zeros),
-            ((1.0 - centre).abs(), (1.0 - centre).abs(), self.ones),
-        ];
+        self.top_share_by(k, |v| (v - centre).abs().powi(power))
+    }
+
+    /// The share of `sum w(x)` that the `k` values of largest weight carry, each of them taken
+    /// at its bin's heavier edge and the rest at their bins' centres (so the share errs high);
+    /// 1 when every weight is 0 (the run saw nothing to weigh). `w` must be non-negative and
+    /// monotone on either side of one point (true of `|x - c|^p` and `(x^2 - c)^2` for
+    /// `x >= 0`), so that its largest value in a bin is at an edge. Whether a moment of this
+    /// run rests on a handful of observations.
+    pub fn top_share_by(&self, k: u64, w: impl Fn(f64) -> f64) -> f64 {
+        // (heaviest weight, typical weight, count) of every atom and bin.
+        let mut groups: Vec<(f64, f64, u64)> =
+            vec![(w(0.0), w(0.0), self.zeros), (w(1.0), w(1.0), self.ones)];
         for (&b, &c) in &self.bins {
             let (lo, hi) = (bin_edge(b), bin_edge(b + 1));
-            let far = (lo - centre).abs().max((hi - centre).abs());
-            groups.push((far, ((lo * hi).sqrt() - centre).abs(), c));
+            groups.push((w(lo).max(w(hi)), w((lo * hi).sqrt()), c));
         }
         groups.sort_by(|a, b| b.0.total_cmp(&a.0));
         let (mut top, mut total, mut left) = (0.0, 0.0, k);
         for (far, typical, count) in groups {
             let taken = count.min(left);
             left -= taken;
-            top += taken as f64 * far.powi(power);
-            total += taken as f64 * far.powi(power) + (count - taken) as f64 * typical.powi(power);
+            top += taken as f64 * far;
+            total += taken as f64 * far + (count - taken) as f64 * typical;
         }
         if total > 0.0 { top / total } else { 1.0 }
     }
@@ -572,24 +577,41 @@ const LEVEL_TAIL: f64 = 0.025;
 /// Confidence level of every interval.
 pub const LEVEL: f64 = 0.95;
 
-/// Wilson score interval for `successes` out of `trials` (docs/estimators.md §7).
+/// One-sided 95% Poisson lower bounds on the expected count after observing 1, 2 and 3
+/// events: half the 5% quantile of a chi-square with 2, 4 and 6 degrees of freedom.
+const POISSON_LOW: [f64; 3] = [
+    0.051_293_294_387_550_5,
+    0.355_361_510_698_662,
+    0.817_691_447_163_953_4,
+];
+
+/// Wilson score interval for `successes` out of `trials` (docs/estimators.md §7), with Brown,
+/// Cai and DasGupta's modification near the ends (Statistical Science 16(2), 2001, §4.1.1): at
+/// 1, 2 or 3 successes (or failures) the Wilson end on that side is replaced by the one-sided
+/// Poisson bound. Plain Wilson covers as little as 84% when the expected count is about 0.18
+/// (one firefly seen where 0.18 were due); the modified interval stays at or above 92.7%.
 pub fn wilson(successes: u64, trials: u64) -> Interval {
     let m = trials as f64;
     let p = successes as f64 / m;
     let z2 = Z * Z;
     let centre = (p + z2 / (2.0 * m)) / (1.0 + z2 / m);
     let half = Z * (p * (1.0 - p) / m + z2 / (4.0 * m * m)).sqrt() / (1.0 + z2 / m);
+    let poisson = |count: u64| {
+        POISSON_LOW
+            .get((count as usize).wrapping_sub(1))
+            .map(|l| l / m)
+    };
     // At 0 or all successes the end on that side is exactly 0 or 1 (rounding would otherwise
     // leave 0.9999999999999999, excluding a true rate of 1).
-    let low = if successes == 0 {
-        0.0
-    } else {
-        (centre - half).max(0.0)
+    let low = match (successes, poisson(successes)) {
+        (0, _) => 0.0,
+        (_, Some(l)) if trials > 3 => l,
+        _ => (centre - half).max(0.0),
     };
-    let high = if successes == trials {
-        1.0
-    } else {
-        (centre + half).min(1.0)
+    let high = match (trials - successes, poisson(trials - successes)) {
+        (0, _) => 1.0,
+        (_, Some(l)) if trials > 3 => 1.0 - l,
+        _ => (centre + half).min(1.0),
     };
     Interval {
         value: p,
@@ -745,6 +767,7 @@ impl CellAccumulator {
             .max(0.0)
             .sqrt();
         let mse = self.squared_error.mean();
+        let mae = self.abs_rel_error.mean();
         let mse_se = self.squared_error.standard_error();
         let mse_interval = Interval::non_negative(mse, mse_se);
         let rel_rmse = mse.sqrt();
@@ -779,10 +802,7 @@ impl CellAccumulator {
                 // interval's width over 2 Z.
                 se: Some((high - low) / (2.0 * Z)),
             },
-            mean_abs_rel_error: Interval::non_negative(
-                self.abs_rel_error.mean(),
-                self.abs_rel_error.standard_error(),
-            ),
+            mean_abs_rel_error: Interval::non_negative(mae, self.abs_rel_error.standard_error()),
             rel_error_quantiles: Metric::QUANTILES.map(|(q, m)| (m, h.quantile(q))),
             firefly_rate: wilson(self.fireflies, t),
             outlier_trials: self.outlier_trials,
@@ -802,7 +822,18 @@ impl CellAccumulator {
                 let centre = self.estimate.mean();
                 TopShares {
                     deviation: [x.top_share(centre, k, 2), x.top_share(centre, k, 4)],
-                    error: [e.top_share(0.0, k, 2), e.top_share(0.0, k, 4)],
+                    error: [
+                        spread_share(
+                            &self.abs_rel_error,
+                            e.top_share_by(k, |a| (a - mae).powi(2)),
+                        )
+                        .max(e.top_share_by(k, |a| a)),
+                        spread_share(
+                            &self.squared_error,
+                            e.top_share_by(k, |a| (a * a - mse).powi(2)),
+                        )
+                        .max(e.top_share_by(k, |a| a * a)),
+                    ],
                     paired: self.paired_hists.each_ref().map(|h| h.top_share(0.0, k, 2)),
                 }
             },
@@ -843,13 +874,27 @@ pub struct CellMetrics {
     pub top_share: TopShares,
 }
 
+/// A spread's top share, or 1 when the moments saw no spread at all (values that sit inside
+/// one histogram bin would otherwise look evenly spread).
+fn spread_share(moments: &Moments, share: f64) -> f64 {
+    if moments.sample_variance() > 0.0 {
+        share
+    } else {
+        1.0
+    }
+}
+
 /// Shares of a cell's second and fourth moments carried by its [`TAIL_EVENTS`] most extreme
 /// trials: above 1/2, the run's spread rests on a handful of trials (or, at 1, on none).
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct TopShares {
     /// Of `sum (X - mean X)^2` and `sum (X - mean X)^4`: behind bias and variance.
     pub deviation: [f64; 2],
-    /// Of `sum |X - mu|^2` and `sum |X - mu|^4`: behind MSE and the mean absolute error.
+    /// Behind the mean absolute error `a = |X - mu| / mu` and the MSE `a^2`: the larger of the
+    /// share of the value (`sum a`, `sum a^2`) and of its spread (`sum (a - mean a)^2`,
+    /// `sum (a^2 - mean a^2)^2`). The spread matters on its own: when every trial misses by
+    /// the same amount (a MoN that returns 0 on a mostly black pixel) the run has seen none of
+    /// the rare trials that carry the true MSE, and its interval would be a point.
     pub error: [f64; 2],
     /// Of `sum d^2` for the paired differences `d` against the mean (absolute error, squared
     /// error), taken around 0: a difference that is 0 but in a few trials rests on those.
@@ -917,6 +962,28 @@ mod tests {
             assert_eq!(wilson(m, m).high, Some(1.0), "{m}");
             assert_eq!(wilson(0, m).low, Some(0.0), "{m}");
         }
+    }
+
+    #[test]
+    fn wilson_ends_use_poisson_bounds_at_one_to_three_events() {
+        use statrs::distribution::{ChiSquared, ContinuousCDF};
+        for (k, &bound) in POISSON_LOW.iter().enumerate() {
+            let chi = ChiSquared::new(2.0 * (k + 1) as f64).unwrap();
+            let got = chi.inverse_cdf(0.05) / 2.0;
+            assert!((got - bound).abs() < 1e-9, "{k}: {got} vs {bound}");
+        }
+        // One firefly in 4096 trials: the lower end is 0.0513/4096, not Wilson's 0.1765/4096,
+        // so a true rate of 0.1/4096 is inside.
+        let w = wilson(1, 4096);
+        assert_eq!(w.low, Some(POISSON_LOW[0] / 4096.0));
+        assert!(w.low.unwrap() < 0.1 / 4096.0 && w.high.unwrap() > 4.0 / 4096.0);
+        // Mirrored at the other end; four events and more are plain Wilson.
+        assert_eq!(wilson(4093, 4096).high, Some(1.0 - POISSON_LOW[2] / 4096.0));
+        let plain = wilson(4, 4096);
+        assert!(
+            (plain.low.unwrap() * 4096.0 - 1.55).abs() < 0.05,
+            "{plain:?}"
+        );
     }
 
     #[test]
