@@ -1018,7 +1018,7 @@ pub fn table(outcome: &Outcome) -> String {
         )
     });
     s.push_str(
-        "| verdict | distribution | estimator | n | metric | baseline | now | worse by | margin | z | p (one-sided) | Holm level | flags from |\n\
+        "| verdict | distribution | estimator | n | metric | baseline | now | worse by | margin | z | p | Holm level | flags from |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let opt = |x: Option<f64>, f: &dyn Fn(f64) -> String| x.map_or("–".to_string(), f);
