@@ -19,16 +19,28 @@ fn git(args: &[&str]) -> Option<String> {
 }
 
 /// The paths whose change means HEAD moved: HEAD itself, the loose branch refs (a directory,
-/// which Cargo scans, so a branch file created by a commit is seen) and packed-refs.
+/// which Cargo scans, so a branch file created by a commit is seen) and packed-refs. In a linked
+/// worktree HEAD is the worktree's own, but the branch refs live in the common directory: a
+/// commit there changes only the latter.
 fn watched_git_paths() -> Vec<PathBuf> {
     let Some(git_dir) = git(&["rev-parse", "--absolute-git-dir"]) else {
         return Vec::new();
     };
     let git_dir = PathBuf::from(git_dir);
+    let common = git(&["rev-parse", "--git-common-dir"])
+        .map(PathBuf::from)
+        .map(|c| {
+            if c.is_absolute() {
+                c
+            } else {
+                std::env::current_dir().unwrap_or_default().join(c)
+            }
+        })
+        .unwrap_or_else(|| git_dir.clone());
     let mut paths = vec![
         git_dir.join("HEAD"),
-        git_dir.join("refs").join("heads"),
-        git_dir.join("packed-refs"),
+        common.join("refs").join("heads"),
+        common.join("packed-refs"),
     ];
     paths.retain(|p| Path::new(p).exists());
     paths
