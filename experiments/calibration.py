@@ -18,7 +18,9 @@ correct code, and how often does the regression gate raise a false alarm?
    all seeds together saw, the pooled value is low too; such cells say "pooled").
 3. Counts seeds whose run exited 1 (a gating check failed), per check kind and preset.
 4. With --gate-seeds K, runs `fireflies gate experiments/gate.toml` against the committed
-   baseline on K seeds other than the baseline's and counts false alarms (exit code 1).
+   baseline on K seeds other than the baseline's and counts false alarms (exit code 1). A gate
+   run already stored in the work directory is judged again under the current gate rules
+   (`fireflies gate --results`), not rerun.
 
 Writes `coverage.csv` (one row per cell), `checks.csv`, `gate.csv` (with --gate-seeds) and
 `summary.md` into --out. Needs only the Python standard library.
@@ -73,19 +75,18 @@ def run_seed(binary, experiment, work, seed):
 
 
 def run_gate(binary, work, seed):
+    """The gate's exit code on `seed`. A run stored by an earlier call is judged again with
+    `--results` under the current gate rules (seconds) instead of being rerun (minutes)."""
     out = os.path.join(work, f"gate-{seed}")
-    code_file = os.path.join(work, f"gate-{seed}.exit-code")
-    if os.path.exists(code_file):
-        with open(code_file) as f:
-            return seed, int(f.read())
     cmd = [binary, "gate", os.path.join(ROOT, "experiments", "gate.toml"), "--baseline",
-           os.path.join(ROOT, "reports", "baseline", "gate.csv"), "--seed", str(seed),
-           "--threads", "1", "--out", out]
+           os.path.join(ROOT, "reports", "baseline", "gate.csv")]
+    if os.path.exists(os.path.join(out, "results.csv")):
+        cmd += ["--results", out]
+    else:
+        cmd += ["--seed", str(seed), "--threads", "1", "--out", out]
     r = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if r.returncode not in (0, 1):
         sys.exit(f"gate seed {seed}: exited {r.returncode}:\n{r.stderr}")
-    with open(code_file, "w") as f:
-        f.write(str(r.returncode))
     return seed, r.returncode
 
 
