@@ -15,6 +15,7 @@
 
 use crate::dist::Dist;
 use crate::harness::metrics::{Caveat, CellMetrics, Interval, Metric, TAIL_EVENTS, Z};
+use crate::harness::pairs::PairEffect;
 use rand::SeedableRng;
 use rand_distr::{Binomial, Distribution};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -240,6 +241,8 @@ pub fn caveat(
     metric: Metric,
     cell: &CellMetrics,
     law: Option<&MeanLaw>,
+    pairs: Option<&PairEffect>,
+    mu: f64,
     is_mean: bool,
     infinite_law_variance: bool,
 ) -> Option<Caveat> {
@@ -253,6 +256,11 @@ pub fn caveat(
             return Some(Caveat::InfiniteTruth);
         }
         _ => {}
+    }
+    // What the run cannot see: trials with two outliers (the mean's own rare events are the
+    // law's dominance below).
+    if !is_mean && pairs.is_some_and(|p| p.could_move(metric, cell, mu)) {
+        return Some(Caveat::TailDominated);
     }
     let top = &cell.top_share;
     let law_share = |power: usize| law.map_or(0.0, |l| l.dominance[power]);

@@ -7,6 +7,7 @@ pub mod experiment;
 pub mod gate;
 pub mod law;
 pub mod metrics;
+pub mod pairs;
 pub mod runner;
 pub mod shards;
 

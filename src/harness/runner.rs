@@ -12,6 +12,7 @@ use super::claims;
 use super::experiment::{Distribution, Experiment};
 use super::law::MeanLaw;
 use super::metrics::{CellAccumulator, Observation};
+use super::pairs::{self, PairEffect};
 use crate::error::{Error, Result};
 use crate::estimators::{Estimator, EstimatorSpec, Mean, validate_samples};
 use crate::limits::{self, MemoryLimit};
@@ -81,6 +82,9 @@ pub struct DistResult {
     /// Per checkpoint, what the law says about the plain mean's cell (`None` when the
     /// experiment does not run the mean).
     pub mean_laws: Vec<Option<MeanLaw>>,
+    /// Per cell (estimator-major, like `cells`), what trials with two outliers do to it, where
+    /// the run expects too few of them to see ([`pairs`]).
+    pub pair_effects: Vec<Option<PairEffect>>,
 }
 
 impl DistResult {
@@ -248,7 +252,15 @@ pub fn run(exp: &Experiment, opts: &RunOptions) -> Result<RunOutput> {
         .distributions
         .iter()
         .zip(totals)
-        .map(|(d, total)| dist_result(exp, d, trials, total))
+        .map(|(d, total)| {
+            dist_result(
+                exp,
+                d,
+                opts.build.unwrap_or(EstimatorSpec::build),
+                trials,
+                total,
+            )
+        })
         .collect();
     Ok(RunOutput {
         trials,
@@ -295,7 +307,13 @@ fn prepare(
 
 /// One distribution's results from its folded statistics, with what the law says about the
 /// mean's cells (seeded from the experiment's seed, the label and n, so it is reproducible).
-fn dist_result(exp: &Experiment, d: &Distribution, trials: u64, total: BlockStats) -> DistResult {
+fn dist_result(
+    exp: &Experiment,
+    d: &Distribution,
+    build: BuildFn,
+    trials: u64,
+    total: BlockStats,
+) -> DistResult {
     let runs_mean = exp.estimators.contains(&EstimatorSpec::Mean);
     let mean_laws = exp
         .file
@@ -322,8 +340,35 @@ fn dist_result(exp: &Experiment, d: &Distribution, trials: u64, total: BlockStat
         state_bytes_max: total.state_bytes_max,
         state_bytes_sum: total.state_bytes_sum,
         mean_laws,
+        pair_effects: pair_effects(exp, d, build, trials),
     }
 }
+
+/// [`pairs::effects`] of every checkpoint, laid out like the cells (estimator-major), from a
+/// stream of the experiment's seed, the label and n.
+fn pair_effects(
+    exp: &Experiment,
+    d: &Distribution,
+    build: BuildFn,
+    trials: u64,
+) -> Vec<Option<PairEffect>> {
+    let cps = &exp.file.checkpoints;
+    let per_n: Vec<Vec<Option<PairEffect>>> = cps
+        .par_iter()
+        .map(|&n| {
+            let seed = splitmix64(
+                splitmix64(exp.file.seed ^ fnv1a(&d.label)) ^ splitmix64(n as u64 ^ PAIR_STREAM),
+            );
+            pairs::effects(d, &exp.estimators, build, n, trials, seed)
+        })
+        .collect();
+    (0..exp.estimators.len())
+        .flat_map(|e| per_n.iter().map(move |v| v[e]))
+        .collect()
+}
+
+/// Salt of the streams of [`pairs::effects`].
+const PAIR_STREAM: u64 = 0x7061_6972_735f_6f75;
 
 /// Salt of the streams that simulate the law's null, apart from every trial's stream.
 const LAW_STREAM: u64 = 0x6c61_775f_6e75_6c6c;
@@ -460,7 +505,7 @@ pub fn fold(exp: &Experiment, shards: &[ShardOutput]) -> Result<RunOutput> {
                 total.merge(b);
             }
         }
-        dists.push(dist_result(exp, d, trials, total));
+        dists.push(dist_result(exp, d, EstimatorSpec::build, trials, total));
     }
     Ok(RunOutput {
         trials,

@@ -35,7 +35,15 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
                     m.bias = l.bias_interval(m.bias, d.mu);
                 }
                 let mut push = |metric: Metric, iv: Interval| {
-                    let caveat = law::caveat(metric, &m, mean_law, is_mean, infinite_variance);
+                    let caveat = law::caveat(
+                        metric,
+                        &m,
+                        mean_law,
+                        d.pair_effects[e * cps.len() + i].as_ref(),
+                        d.mu,
+                        is_mean,
+                        infinite_variance,
+                    );
                     let value = match caveat {
                         Some(Caveat::InfiniteTruth) if metric == Metric::PairedMseVsMean => {
                             f64::NEG_INFINITY
