@@ -579,7 +579,7 @@ fn exact_entry(
     p: f64,
 ) -> Option<(Key, f64)> {
     (check == CheckKind::Unbiased.name() && estimator == "mean" && !p.is_nan())
-        .then(|| ((distribution, estimator, n, Metric::RelativeBias), p))
+        .then_some(((distribution, estimator, n, Metric::RelativeBias), p))
 }
 
 impl Snapshot {
@@ -1177,7 +1177,14 @@ mod tests {
         let run = |p: f64| {
             let exact: ExactTests = [(key(&now), p)].into();
             let keys: BTreeSet<Key> = [key(&now)].into();
-            compare_expected(&[base.clone()], &[now.clone()], &keys, &exact, &cfg).comparisons[0]
+            compare_expected(
+                std::slice::from_ref(&base),
+                std::slice::from_ref(&now),
+                &keys,
+                &exact,
+                &cfg,
+            )
+            .comparisons[0]
                 .clone()
         };
         let common = run(0.3);
@@ -1188,7 +1195,13 @@ mod tests {
         assert!((common.z.unwrap() - 1.036).abs() < 1e-3, "{:?}", common.z);
         assert_eq!(run(1e-9).verdict, Verdict::Regression);
         assert_eq!(
-            compare(&[base.clone()], &[now.clone()], &cfg).comparisons[0].verdict,
+            compare(
+                std::slice::from_ref(&base),
+                std::slice::from_ref(&now),
+                &cfg
+            )
+            .comparisons[0]
+                .verdict,
             Verdict::Regression
         );
         // The check's p-values are read from checks.json: only `unbiased` of `mean` counts.
