@@ -70,9 +70,13 @@ pub struct Features {
     /// appears to be).
     pub depth: f32,
     /// 1 if the next-event shadow ray at the hit reached the sampled emitter point, 0 if it was
-    /// occluded or the emitter sample gave nothing (its back, a degenerate sample). The ray is
-    /// traced even where the BSDF is zero toward the light, so this is geometric visibility.
-    /// 1 where no shadow ray is cast (`max_depth` ends the path at the hit).
+    /// occluded or the emitter sample gave nothing (its back, a degenerate sample). Where the
+    /// BSDF is zero toward the light the colour path casts no ray; the feature then casts it
+    /// itself, so this is geometric visibility, except that an emitter behind the surface (on
+    /// the other side of the geometric normal from the camera path) counts as occluded by the
+    /// surface unless the BSDF transmits. 1 where no shadow ray is cast (`max_depth` ends the
+    /// path at the hit). Its mean over a pixel's samples is the fraction of unoccluded shadow
+    /// rays NFOR asks for.
     pub visibility: f32,
 }
 
@@ -129,6 +133,7 @@ fn trace<const FEATURES: bool>(
     let mut features = Features::ESCAPED;
     let mut found = false;
     let mut travelled = 0.0f32;
+    let mut last_vertex = ray.o;
     let mut awaiting_visibility = false;
 
     loop {
@@ -144,7 +149,9 @@ fn trace<const FEATURES: bool>(
             break;
         };
         if FEATURES && !found {
-            travelled += hit.t;
+            // From the previous vertex itself, not the offset origin of the spawned ray.
+            travelled += (hit.p - last_vertex).length();
+            last_vertex = hit.p;
             let bsdf = &*world.bsdfs[hit.shape as usize];
             if bsdf.has_smooth_lobe() {
                 let at = SurfacePoint {
@@ -205,8 +212,12 @@ fn trace<const FEATURES: bool>(
                         result += beta * f * ls.radiance * (w / ls.pdf);
                     }
                 } else if FEATURES && awaiting_visibility {
-                    let (shadow, dist) = shadow_ray(&hit, ls.wi, ls.dist);
-                    visible = !world.bvh.occluded(&shadow, 0.0, dist);
+                    // The surface itself hides an emitter behind it unless light passes.
+                    let behind = ls.wi.dot(hit.ng) * ray.d.dot(hit.ng) > 0.0;
+                    if !behind || bsdf.transmits() {
+                        let (shadow, dist) = shadow_ray(&hit, ls.wi, ls.dist);
+                        visible = !world.bvh.occluded(&shadow, 0.0, dist);
+                    }
                 }
             }
             if FEATURES && awaiting_visibility {
