@@ -103,10 +103,10 @@ impl<const K: usize> Moments<K> {
     fn push(&mut self, x: &[f64; K]) {
         self.count += 1;
         let n = self.count as f64;
-        for k in 0..K {
-            let d = x[k] - self.mean[k];
-            self.mean[k] += d / n;
-            self.m2[k] += d * (x[k] - self.mean[k]);
+        for ((&x, mean), m2) in x.iter().zip(&mut self.mean).zip(&mut self.m2) {
+            let d = x - *mean;
+            *mean += d / n;
+            *m2 += d * (x - *mean);
         }
     }
 

@@ -107,13 +107,13 @@ impl NforBuffers {
         let mut buffers = serde_json::Map::new();
         for (name, buf) in self.buffers() {
             let mut files = serde_json::Map::new();
-            for h in 0..2 {
-                let mean = format!("{name}_{}", HALVES[h]);
+            for (h, half) in HALVES.iter().enumerate() {
+                let mean = format!("{name}_{half}");
                 let var = format!("{mean}_var");
                 write_tagged(&buf.mean[h], dir, &mean, counts[h], self.seed)?;
                 write_tagged(&buf.var[h], dir, &var, counts[h], self.seed)?;
-                files.insert(HALVES[h].into(), json!(format!("{mean}.exr")));
-                files.insert(format!("{}_var", HALVES[h]), json!(format!("{var}.exr")));
+                files.insert((*half).into(), json!(format!("{mean}.exr")));
+                files.insert(format!("{half}_var"), json!(format!("{var}.exr")));
             }
             buffers.insert(name.into(), Value::Object(files));
         }
@@ -121,10 +121,10 @@ impl NforBuffers {
         for e in &self.estimators {
             let mut entry = serde_json::Map::new();
             entry.insert("spec".into(), json!(e.spec));
-            for h in 0..2 {
-                let name = format!("{}_{}", e.stem, HALVES[h]);
+            for (h, half) in HALVES.iter().enumerate() {
+                let name = format!("{}_{half}", e.stem);
                 write_tagged(&e.image[h], dir, &name, counts[h], self.seed)?;
-                entry.insert(HALVES[h].into(), json!(format!("{name}.exr")));
+                entry.insert((*half).into(), json!(format!("{name}.exr")));
             }
             estimators.push(Value::Object(entry));
         }
@@ -204,9 +204,9 @@ impl NforBuffers {
         let buffer = |name: &str| -> Result<HalfBuffer> {
             let mut mean = Vec::with_capacity(2);
             let mut var = Vec::with_capacity(2);
-            for h in 0..2 {
-                mean.push(load(&format!("{name}_{}", HALVES[h]), h, false)?);
-                var.push(load(&format!("{name}_{}_var", HALVES[h]), h, true)?);
+            for (h, half) in HALVES.iter().enumerate() {
+                mean.push(load(&format!("{name}_{half}"), h, false)?);
+                var.push(load(&format!("{name}_{half}_var"), h, true)?);
             }
             let pair = |mut v: Vec<Image>| {
                 let b = v.pop().expect("two halves");
@@ -244,12 +244,12 @@ impl NforBuffers {
             let files = [text("a")?, text("b")?];
             let mut stem = String::new();
             let mut image = Vec::with_capacity(2);
-            for h in 0..2 {
-                let suffix = format!("_{}.exr", HALVES[h]);
+            for (h, half) in HALVES.iter().enumerate() {
+                let suffix = format!("_{half}.exr");
                 let s = files[h].strip_suffix(&suffix).ok_or_else(|| {
                     bad(
                         &json_path,
-                        format!("nfor.estimators[{i}].{} must end in {suffix}", HALVES[h]),
+                        format!("nfor.estimators[{i}].{half} must end in {suffix}"),
                     )
                 })?;
                 if s.is_empty() || s.contains(['/', '\\']) || (h == 1 && s != stem) {
@@ -263,7 +263,7 @@ impl NforBuffers {
                     ));
                 }
                 stem = s.to_string();
-                image.push(load(&format!("{s}_{}", HALVES[h]), h, false)?);
+                image.push(load(&format!("{s}_{half}"), h, false)?);
             }
             let b = image.pop().expect("two halves");
             let a = image.pop().expect("two halves");
@@ -364,7 +364,7 @@ fn read_tagged(
         (ATTR_SEED, seed.to_string()),
     ] {
         let got = attrs.iter().find_map(|(k, v)| match v {
-            AttributeValue::Text(t) if k.to_string() == key => Some(t.to_string()),
+            AttributeValue::Text(t) if k.eq(key) => Some(t.to_string()),
             _ => None,
         });
         if got.as_deref() != Some(want.as_str()) {
