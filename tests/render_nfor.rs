@@ -623,3 +623,66 @@ fn render_command_writes_buffers_the_reader_checks() {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+/// A floor seen from above, lit only by a point light below it: a BSDF that does not transmit
+/// is zero toward the light, so the colour path casts no shadow ray; the feature casts its own
+/// and counts the floor itself as the occluder (visibility 0). A rough dielectric floor
+/// transmits, so the same light is visible through it (visibility 1).
+#[test]
+fn visibility_of_an_emitter_behind_the_surface() {
+    let scene = |bsdf: &str| {
+        world(&format!(
+            r#"<scene version="3.0.0">
+                <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+                {}
+                <emitter type="point"><rgb name="intensity" value="1"/><point name="position" value="0, 0, -1"/></emitter>
+                <shape type="rectangle"><transform name="to_world"><scale value="3"/></transform>{bsdf}</shape>
+            </scene>"#,
+            sensor(30.0, 4)
+        ))
+    };
+    for (bsdf, want) in [
+        (r#"<bsdf type="diffuse"/>"#, 0.0),
+        (
+            r#"<bsdf type="twosided"><bsdf type="diffuse"/></bsdf>"#,
+            0.0,
+        ),
+        (
+            r#"<bsdf type="roughdielectric"><float name="alpha" value="0.3"/></bsdf>"#,
+            1.0,
+        ),
+    ] {
+        let nfor = render(&scene(bsdf), &config(&["mean"], 4, vec![]), true, 1)
+            .nfor
+            .unwrap();
+        for i in 0..16 {
+            for h in 0..2 {
+                assert_eq!(px(&nfor.visibility.mean[h], i), [want; 3], "{bsdf}");
+                assert!(px(&nfor.depth.mean[h], i)[0] >= 5.0, "{bsdf}");
+            }
+        }
+    }
+}
+
+/// The halves count against the memory limit: a film that fits without `--nfor` is refused
+/// with it, and the message says why.
+#[test]
+fn nfor_counts_against_the_memory_limit() {
+    let w = mixed(64);
+    let mut cfg = config(&["mean"], 4, vec![]);
+    // 64x64 pixels: the plain film needs well under 1 MB; the halves add 920 bytes a pixel
+    // (3.8 MB).
+    cfg.memory = fireflies::limits::MemoryLimit(2_000_000);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let check_only = |nfor: bool| {
+        let mut tiny = cfg.clone();
+        tiny.spp = 4;
+        pool.install(|| film::render_with_nfor(&w, &tiny, nfor, |_| {}))
+    };
+    assert!(check_only(false).is_ok());
+    let e = check_only(true).unwrap_err().to_string();
+    assert!(e.contains("NFOR buffers") && e.contains("memory"), "{e}");
+}
