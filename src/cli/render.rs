@@ -4,7 +4,7 @@
 use clap::Args;
 use fireflies::estimators::EstimatorSpec;
 use fireflies::limits::{self, MemoryLimit, shorten};
-use fireflies::render::film::{self, FilmConfig};
+use fireflies::render::film::{self, FilmConfig, file_stem};
 use fireflies::render::mitsuba;
 use fireflies::render::world::World;
 use fireflies::report::{tables::git_commit, write_atomic};
@@ -50,6 +50,11 @@ pub struct RenderArgs {
     /// Exposure multiplier of the PNG previews (the EXR files are linear and unscaled).
     #[arg(long, default_value_t = 1.0)]
     exposure: f32,
+    /// Also write the buffers NFOR denoising reads: colour and features (normal, albedo, depth,
+    /// visibility) of two independent halves of the samples with their variances, and every
+    /// estimator on each half (README, "Buffers for denoising"). Needs at least 4 spp.
+    #[arg(long)]
+    nfor: bool,
 }
 
 /// The reconstruction filters `--rfilter` may force.
@@ -112,11 +117,6 @@ fn parse_pixels(text: &str) -> Result<Vec<(u32, u32)>> {
         .collect()
 }
 
-/// A file-name-safe form of a spec string (`gmonb:M=21,threshold=0.3` -> `gmonb_M=21_threshold=0.3`).
-pub fn file_stem(spec: &EstimatorSpec) -> String {
-    spec.to_string().replace([':', ','], "_")
-}
-
 pub fn run(args: &RenderArgs, memory: MemoryLimit) -> Result<ExitCode> {
     if !(args.exposure.is_finite() && args.exposure > 0.0) {
         return Err(Error::param(
@@ -163,8 +163,11 @@ pub fn run(args: &RenderArgs, memory: MemoryLimit) -> Result<ExitCode> {
     let start = Instant::now();
     let world = World::new(&scene);
     let build_s = start.elapsed().as_secs_f64();
-    let out =
-        pool.install(|| film::render(&world, &cfg, |done| bar.set_position(u64::from(done))))?;
+    let out = pool.install(|| {
+        film::render_with_nfor(&world, &cfg, args.nfor, |done| {
+            bar.set_position(u64::from(done))
+        })
+    })?;
     let wall_s = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
 
@@ -195,7 +198,15 @@ pub fn run(args: &RenderArgs, memory: MemoryLimit) -> Result<ExitCode> {
             text.as_bytes(),
         )?;
     }
-    let report = serde_json::json!({
+    let nfor = match &out.nfor {
+        Some(buffers) => {
+            let mut manifest = buffers.write(&args.out)?;
+            manifest["extra_bytes_per_pixel"] = serde_json::json!(nfor_bytes(&cfg, &out));
+            Some(manifest)
+        }
+        None => None,
+    };
+    let mut report = serde_json::json!({
         "scene": args.scene.display().to_string(),
         "width": world.camera.width(),
         "height": world.camera.height(),
@@ -223,6 +234,9 @@ pub fn run(args: &RenderArgs, memory: MemoryLimit) -> Result<ExitCode> {
         "peak_rss_bytes": limits::peak_rss_bytes(),
         "git_commit": git_commit(),
     });
+    if let Some(nfor) = nfor {
+        report["nfor"] = nfor;
+    }
     let text = serde_json::to_string_pretty(&report).unwrap_or_default();
     write_atomic(&args.out.join("render.json"), text.as_bytes())?;
     eprintln!(
@@ -235,4 +249,12 @@ pub fn run(args: &RenderArgs, memory: MemoryLimit) -> Result<ExitCode> {
         Path::new(&args.out).display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// What the NFOR halves add per pixel: two more banks (their measured state) plus the moments
+/// and final images ([`film::nfor_bytes_per_pixel`]).
+fn nfor_bytes(cfg: &FilmConfig, out: &film::FilmOutput) -> usize {
+    let bank: f64 = out.state_bytes.iter().sum();
+    let boxes = cfg.estimators.len() * 2 * size_of::<usize>();
+    film::nfor_bytes_per_pixel(bank.round() as usize + boxes, cfg.estimators.len())
 }

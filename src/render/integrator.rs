@@ -53,8 +53,67 @@ fn shadow_ray(hit: &Hit, wi: Vec3, dist: f32) -> (Ray, f32) {
     (ray, (len - margin).max(0.0))
 }
 
+/// What one camera sample saw at its *first non-specular hit*: the first surface along the
+/// camera path whose BSDF has a smooth lobe (where next-event estimation runs), after following
+/// every surface that has only delta lobes (mirror, smooth glass). These are the per-sample
+/// feature values of NFOR (Bitterli et al., EGSR 2016); README "Buffers for denoising" says
+/// what each holds, and [`Features::ESCAPED`] what a path without such a hit gives.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Features {
+    /// World-space shading normal at the hit (the interpolated normal, as the BSDF sees it
+    /// before any bump map; not flipped toward the ray).
+    pub normal: Vec3,
+    /// [`super::bsdfs::Bsdf::albedo`] at the hit, textures evaluated.
+    pub albedo: Rgb,
+    /// Length of the camera path up to the hit: the distance from the camera for a direct hit,
+    /// and the unfolded distance through mirrors and glass otherwise (where the reflection
+    /// appears to be).
+    pub depth: f32,
+    /// 1 if the next-event shadow ray at the hit reached the sampled emitter point, 0 if it was
+    /// occluded or the emitter sample gave nothing (its back, a degenerate sample). Where the
+    /// BSDF is zero toward the light the colour path casts no ray; the feature then casts it
+    /// itself, so this is geometric visibility, except that an emitter behind the surface (on
+    /// the other side of the geometric normal from the camera path) counts as occluded by the
+    /// surface unless the BSDF transmits. 1 where no shadow ray is cast (`max_depth` ends the
+    /// path at the hit). Its mean over a pixel's samples is the fraction of unoccluded shadow
+    /// rays NFOR asks for.
+    pub visibility: f32,
+}
+
+impl Features {
+    /// A path that escaped, died on a delta surface or hit nothing smooth within `max_depth`:
+    /// nothing to describe. Normal and albedo 0 and depth 0 set such pixels apart from any
+    /// surface (NFOR only regresses within a window, so a constant is what it needs); visibility
+    /// 1, as nothing was seen to occlude.
+    pub const ESCAPED: Features = Features {
+        normal: Vec3::ZERO,
+        albedo: Rgb::ZERO,
+        depth: 0.0,
+        visibility: 1.0,
+    };
+}
+
 /// The radiance of one camera sample of pixel `(x, y)`, drawn from `rng`.
 pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
+    trace::<false>(world, x, y, rng).0
+}
+
+/// The radiance of one camera sample and its [`Features`]. The same path as [`radiance`]: it
+/// draws the same random numbers in the same order, so the radiance is bit-identical; the only
+/// extra work is a shadow ray where the colour path skips it (a BSDF that is zero toward the
+/// light) and the albedo lookup.
+pub fn radiance_features(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> (Rgb, Features) {
+    trace::<true>(world, x, y, rng)
+}
+
+/// The path tracer; with `FEATURES` false every feature statement compiles away.
+#[inline(always)]
+fn trace<const FEATURES: bool>(
+    world: &World,
+    x: u32,
+    y: u32,
+    rng: &mut SampleStream,
+) -> (Rgb, Features) {
     let cam = world.camera.ray(x, y, rng.next_2d());
     let (mut ray, mut tmin, mut tmax) = (cam.ray, cam.tmin, cam.tmax);
     let max_depth = world.integrator.max_depth.unwrap_or(u32::MAX);
@@ -69,6 +128,13 @@ pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
     let mut prev_p = ray.o;
     let mut prev_pdf = 1.0f32;
     let mut prev_delta = true;
+    // Features: what was found, the path length so far, and whether the found hit still waits
+    // for its shadow ray.
+    let mut features = Features::ESCAPED;
+    let mut found = false;
+    let mut travelled = 0.0f32;
+    let mut last_vertex = ray.o;
+    let mut awaiting_visibility = false;
 
     loop {
         let Some(hit) = world.bvh.intersect(&ray, tmin, tmax) else {
@@ -82,6 +148,26 @@ pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
             }
             break;
         };
+        if FEATURES && !found {
+            // From the previous vertex itself, not the offset origin of the spawned ray.
+            travelled += (hit.p - last_vertex).length();
+            last_vertex = hit.p;
+            let bsdf = &*world.bsdfs[hit.shape as usize];
+            if bsdf.has_smooth_lobe() {
+                let at = SurfacePoint {
+                    uv: hit.uv,
+                    frame: Frame::new(hit.ns),
+                    ng: hit.ng,
+                    dp_du: hit.dp_du,
+                    dp_dv: hit.dp_dv,
+                };
+                features.normal = hit.ns;
+                features.albedo = bsdf.albedo(&at);
+                features.depth = travelled;
+                found = true;
+                awaiting_visibility = true;
+            }
+        }
         if let Some(le) = lights.emitted(hit.shape, hit.ng, ray.d) {
             let w = if prev_delta {
                 1.0
@@ -110,12 +196,14 @@ pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
         let u_choice = rng.next_1d();
         let u_light = rng.next_2d();
         if bsdf.has_smooth_lobe() {
+            let mut visible = false;
             if let Some(ls) = lights.sample(hit.p, u_choice, u_light) {
                 let wo = frame.to_local(ls.wi);
                 let (f, bsdf_pdf) = bsdf.eval_pdf(&at, wi, wo);
                 if f.max_element() > 0.0 {
                     let (shadow, dist) = shadow_ray(&hit, ls.wi, ls.dist);
                     if !world.bvh.occluded(&shadow, 0.0, dist) {
+                        visible = true;
                         let w = if ls.delta {
                             1.0
                         } else {
@@ -123,7 +211,18 @@ pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
                         };
                         result += beta * f * ls.radiance * (w / ls.pdf);
                     }
+                } else if FEATURES && awaiting_visibility {
+                    // The surface itself hides an emitter behind it unless light passes.
+                    let behind = ls.wi.dot(hit.ng) * ray.d.dot(hit.ng) > 0.0;
+                    if !behind || bsdf.transmits() {
+                        let (shadow, dist) = shadow_ray(&hit, ls.wi, ls.dist);
+                        visible = !world.bvh.occluded(&shadow, 0.0, dist);
+                    }
                 }
+            }
+            if FEATURES && awaiting_visibility {
+                features.visibility = if visible { 1.0 } else { 0.0 };
+                awaiting_visibility = false;
             }
         }
 
@@ -155,5 +254,5 @@ pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
             beta /= q;
         }
     }
-    result
+    (result, features)
 }

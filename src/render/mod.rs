@@ -17,6 +17,7 @@ pub mod emitters;
 pub mod film;
 pub mod integrator;
 pub mod mitsuba;
+pub mod nfor_buffers;
 pub mod reference;
 pub mod sampler;
 pub mod sampling;

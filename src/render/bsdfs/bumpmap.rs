@@ -185,6 +185,11 @@ impl Bsdf for BumpMap {
         self.nested.transmits()
     }
 
+    /// The nested albedo at the same point: the bump tilts the frame, not the colour.
+    fn albedo(&self, at: &SurfacePoint) -> Rgb {
+        self.nested.albedo(at)
+    }
+
     fn eval_pdf(&self, at: &SurfacePoint, wi: Vec3, wo: Vec3) -> (Rgb, f32) {
         let local = self.local_frame(at, wi);
         let bumped_wo = local.to_local(wo);

@@ -113,6 +113,12 @@ impl Bsdf for Conductor {
         self.specular_reflectance.is_textured()
     }
 
+    /// The reflectance at normal incidence, `F(1) · specular_reflectance`: the metal's own
+    /// colour (gold is yellow), bounded by 1, and the same from every direction.
+    fn albedo(&self, at: &SurfacePoint) -> Rgb {
+        self.ior.fresnel(1.0) * self.specular_reflectance.eval(at.uv)
+    }
+
     fn eval_pdf(&self, _at: &SurfacePoint, _wi: Vec3, _wo: Vec3) -> (Rgb, f32) {
         NONE
     }

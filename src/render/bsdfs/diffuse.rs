@@ -56,6 +56,11 @@ impl Bsdf for Diffuse {
         self.reflectance.is_textured()
     }
 
+    /// The reflectance.
+    fn albedo(&self, at: &SurfacePoint) -> Rgb {
+        self.reflectance.eval(at.uv)
+    }
+
     fn eval_pdf(&self, at: &SurfacePoint, wi: Vec3, wo: Vec3) -> (Rgb, f32) {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return NONE;

@@ -60,6 +60,11 @@ impl Bsdf for Mask {
         self.opacity.is_textured() || self.nested.uses_uv()
     }
 
+    /// `opacity` times the nested albedo: the pass-through reflects nothing.
+    fn albedo(&self, at: &SurfacePoint) -> Rgb {
+        self.nested.albedo(at) * self.opacity(at)
+    }
+
     fn transmits(&self) -> bool {
         true
     }

@@ -149,6 +149,15 @@ pub trait Bsdf: Debug + Send + Sync {
     fn pdf(&self, at: &SurfacePoint, wi: Vec3, wo: Vec3) -> f32 {
         self.eval_pdf(at, wi, wo).1
     }
+
+    /// The surface's colour at `at`, textures evaluated: the *albedo* feature of NFOR-style
+    /// denoisers, which divide it out so that texture detail is not blurred. Each plugin says
+    /// what it returns; the rule is the colour a user painted the surface with, in `[0, 1]` for
+    /// physical inputs and independent of directions (a feature must not be noisy where the
+    /// surface is not). Mitsuba 3's AOV integrator returns the diffuse reflectance for
+    /// `diffuse` and the plastics but π·f(n, n) elsewhere, which is unbounded for a smooth
+    /// rough conductor; Tungsten returns each BSDF's base colour. We follow Tungsten's rule.
+    fn albedo(&self, at: &SurfacePoint) -> Rgb;
 }
 
 /// `v` with its `z` negated (mirror through the tangent plane).

@@ -148,6 +148,13 @@ impl Bsdf for Plastic {
         self.diffuse_reflectance.is_textured() || self.specular_reflectance.is_textured()
     }
 
+    /// `diffuse_reflectance`, the base colour: the coating is colourless unless
+    /// `specular_reflectance` tints it, and its highlight depends on directions (Mitsuba's AOV
+    /// integrator and Tungsten both take the diffuse colour).
+    fn albedo(&self, at: &SurfacePoint) -> Rgb {
+        self.diffuse_reflectance.eval(at.uv)
+    }
+
     fn eval_pdf(&self, at: &SurfacePoint, wi: Vec3, wo: Vec3) -> (Rgb, f32) {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return NONE;

@@ -117,6 +117,12 @@ impl Bsdf for RoughConductor {
         self.specular_reflectance.is_textured()
     }
 
+    /// The reflectance at normal incidence, `F(1) · specular_reflectance`: the metal's own
+    /// colour (gold is yellow), bounded by 1, and the same from every direction.
+    fn albedo(&self, at: &SurfacePoint) -> Rgb {
+        self.ior.fresnel(1.0) * self.specular_reflectance.eval(at.uv)
+    }
+
     fn eval_pdf(&self, at: &SurfacePoint, wi: Vec3, wo: Vec3) -> (Rgb, f32) {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return NONE;

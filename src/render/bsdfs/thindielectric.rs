@@ -68,6 +68,15 @@ impl Bsdf for ThinDielectric {
         self.specular_reflectance.is_textured() || self.specular_transmittance.is_textured()
     }
 
+    /// `F · specular_reflectance + (1 − F) · specular_transmittance` with `F` the interface's
+    /// reflectance at normal incidence: the share of light it sends on, reflected or
+    /// transmitted (1 for clear glass), without the radiance scaling of refraction.
+    fn albedo(&self, at: &SurfacePoint) -> Rgb {
+        let f = self.reflectance(Vec3::Z);
+        self.specular_reflectance.eval(at.uv) * f
+            + self.specular_transmittance.eval(at.uv) * (1.0 - f)
+    }
+
     fn transmits(&self) -> bool {
         true
     }

@@ -57,6 +57,11 @@ impl Bsdf for TwoSided {
         true
     }
 
+    /// The nested albedo (the same on both sides).
+    fn albedo(&self, at: &SurfacePoint) -> Rgb {
+        self.0.albedo(at)
+    }
+
     fn eval_pdf(&self, at: &SurfacePoint, wi: Vec3, wo: Vec3) -> (Rgb, f32) {
         if wi.z < 0.0 {
             self.0.eval_pdf(at, flip_z(wi), flip_z(wo))
