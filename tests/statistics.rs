@@ -270,3 +270,47 @@ zirr_bound = false
         "peak RSS {small} at 65536 trials, {large} at 1048576"
     );
 }
+
+/// Calibration (400 seeds): Zirr's bias on `caustic` at n = 16 covered its truth in 0 of 360
+/// seeds, because the truth rests on trials with two 2000x spikes, expected 0.1 times per run,
+/// which Zirr keeps (it removes one). The law is now asked what such trials do: Zirr's and
+/// Pajot's bias, variance and MSE there are marked, MoN's (whose median of 16 ignores two
+/// spikes) and the plain mean's are not. Deterministic (fixed seed); it fails if the pairs are
+/// not simulated, if their effect is not weighted by their probability (MoN would be marked)
+/// or if the mean stops being exempt.
+#[test]
+fn unseen_pairs_of_outliers_mark_the_estimators_that_keep_them() {
+    let exp = experiment(
+        r#"
+seed = 11
+trials = 4096
+checkpoints = [16, 256]
+estimators = ["mean", "mon:M=21", "zirr:b=8,J=auto,kappa=1,kappa_min=1,u=1", "pajot-rot:learn=50"]
+[[distributions]]
+dist = { kind = "preset", name = "caustic" }
+"#,
+    );
+    let out = harness::run(&exp, &RunOptions::default()).unwrap();
+    let rows = tables::rows(&exp, &out);
+    let zirr = "zirr:b=8,J=auto,kappa=1,kappa_min=1,u=1";
+    for est in [zirr, "pajot-rot:learn=50"] {
+        for metric in [Metric::RelativeBias, Metric::Mse, Metric::Variance] {
+            let r = find(&rows, "caustic", est, 16, metric);
+            assert_eq!(r.caveat, Some(Caveat::TailDominated), "{est} {metric}: {r:?}");
+            assert!(r.ci_low.is_none() && r.se.is_none(), "{r:?}");
+        }
+    }
+    for est in ["mean", "mon:M=21"] {
+        let r = find(&rows, "caustic", est, 16, Metric::RelativeBias);
+        assert_eq!(r.caveat, None, "{est}: {r:?}");
+    }
+    // Zirr is the third estimator; cells are estimator-major over the two checkpoints. At
+    // n = 16 the run expects 0.1 trials with two spikes (4096 x 120 x 0.00045^2), and Zirr's
+    // error on them is about 2 x 2000 / 16 = 250; at n = 256 it expects 27 and sees them, so
+    // nothing is simulated.
+    let effects = &out.dists[0].pair_effects;
+    let at16 = effects[2 * 2].expect("pairs simulated at n = 16");
+    assert!((at16.expected - 0.0995).abs() < 0.002, "{at16:?}");
+    assert!(at16.error > 100.0, "{at16:?}");
+    assert!(effects[2 * 2 + 1].is_none(), "{:?}", effects[2 * 2 + 1]);
+}
