@@ -885,9 +885,11 @@ pub fn transfer_pixel(
             let bias_caveat = law::caveat(Metric::RelativeBias, &m, None, false, false);
             let strip = |iv: Interval, caveat: bool| {
                 if caveat {
+                    // As the harness rows do: no interval and no standard error.
                     Interval {
                         low: None,
                         high: None,
+                        se: None,
                         ..iv
                     }
                 } else {

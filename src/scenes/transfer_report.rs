@@ -585,12 +585,12 @@ fn draw(root: &Area<'_>, points: &[Point], names: &[&str]) -> DrawResult {
     let font = |size: f64| FontDesc::new(FontFamily::Name(FONT), size, FontStyle::Normal);
     let bold = FontDesc::new(FontFamily::Name(FONT), 22.0, FontStyle::Bold);
     root.draw_text(
-        "Relative RMSE: predicted by the harness on the fitted generator vs measured over renders",
+        "Relative RMSE: predicted (harness on the fitted law) vs measured (renders)",
         &bold.into_text_style(root),
         (16, 12),
     )?;
     root.draw_text(
-        "one point per pixel, estimator and n; bars: 95% intervals; solid: y = x; dashed: ±25%",
+        "one point per pixel, estimator and n; bars: 95% intervals (none where a side is tail-dominated); solid: y = x; dashed: ±25%",
         &font(15.0).into_text_style(root),
         (16, 42),
     )?;
