@@ -21,6 +21,9 @@ pub struct TransferArgs {
     /// Use the file's `[quick]` counts (tiny: for CI and a first look).
     #[arg(long)]
     quick: bool,
+    /// Fit the generator to this many samples instead of the file's `fit_spp`.
+    #[arg(long, value_name = "N")]
+    fit_spp: Option<u64>,
     /// Worker threads (default: all cores). Results do not depend on it; timings do.
     #[arg(long)]
     threads: Option<usize>,
@@ -29,7 +32,10 @@ pub struct TransferArgs {
 pub fn run(args: &TransferArgs, memory: MemoryLimit) -> Result<ExitCode> {
     let started = Instant::now();
     let threads = limits::threads(args.threads)?;
-    let exp = TransferExperiment::load(&args.experiment, args.quick)?;
+    let mut exp = TransferExperiment::load(&args.experiment, args.quick)?;
+    if let Some(n) = args.fit_spp {
+        exp = exp.with_fit_spp(n)?;
+    }
     std::fs::create_dir_all(&args.out).map_err(|e| Error::io(args.out.display(), &e))?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)

@@ -420,6 +420,26 @@ impl TransferExperiment {
     }
 }
 
+impl TransferExperiment {
+    /// The same experiment with the fit stream `fit_spp` long (`fireflies transfer
+    /// --fit-spp`): how many samples the fit needs is a question of its own.
+    ///
+    /// # Errors
+    ///
+    /// [`Error::InvalidParameter`] naming `fit-spp` below [`MIN_FIT_SPP`].
+    pub fn with_fit_spp(mut self, fit_spp: u64) -> Result<Self> {
+        if fit_spp < MIN_FIT_SPP {
+            return Err(Error::param(
+                "fit-spp",
+                fit_spp,
+                format!("must be at least {MIN_FIT_SPP}"),
+            ));
+        }
+        self.settings.fit_spp = fit_spp;
+        Ok(self)
+    }
+}
+
 /// Where one pixel's samples come from: camera sample `index` of a render with `seed`, as
 /// luminance, `None` when the sample is invalid (NaN, infinite or negative) and the film would
 /// drop it.
@@ -578,7 +598,7 @@ pub struct FitInfo {
     pub spec: DistSpec,
     /// The fitted mean (the fit stream's mean).
     pub mean: f64,
-    /// The fit stream's standard error of the mean.
+    /// The fit stream's own standard error of its mean.
     pub se: f64,
     /// Components of the fitted mixture.
     pub components: usize,
@@ -659,10 +679,14 @@ impl PixelResult {
         (self.fit.mean - self.truth.mean) / self.truth.mean
     }
 
-    /// Standard error of [`PixelResult::fit_error`] from the fit stream's and the truth's.
+    /// Standard error of [`PixelResult::fit_error`]: the spread of a mean of the fit stream's
+    /// length, taken from the truth's far longer stream (the fit stream's own spread misses
+    /// what it did not see: a stream without the pixel's rare spike looks tame), and the
+    /// truth's own standard error.
     pub fn fit_error_se(&self) -> f64 {
-        let r = self.fit.mean / self.truth.mean;
-        r * ((self.fit.se / self.fit.mean).powi(2) + self.truth.relative_se().powi(2)).sqrt()
+        let sd = self.truth.se * (self.truth.samples as f64).sqrt();
+        let fit = sd / (self.fit.samples.max(1) as f64).sqrt();
+        (fit * fit + self.truth.se * self.truth.se).sqrt() / self.truth.mean
     }
 }
 
