@@ -167,7 +167,10 @@ fn a_pixel_outside_the_image_is_named() {
     let out = transfer(&toml, &dir.join("out2"), &["--quick", "--fit-spp", "10"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("fit-spp") && stderr.contains("10"), "{stderr}");
+    assert!(
+        stderr.contains("fit-spp") && stderr.contains("10"),
+        "{stderr}"
+    );
 }
 
 #[test]

@@ -570,7 +570,7 @@ const SIZE: (u32, u32) = (900, 820);
 
 /// One point of the figure: measured and predicted relative RMSE with their intervals.
 struct Point {
-    class: usize,
+    pixel: usize,
     x: f64,
     y: f64,
     x_interval: Option<(f64, f64)>,
@@ -581,10 +581,17 @@ struct Point {
 /// finite values.
 fn write_plot(path: &Path, results: &[PixelResult]) -> Result<bool> {
     let names = classes(results);
+    // One series per pixel: its shape says the class, its colour the pixel.
+    let series: Vec<(String, usize)> = results
+        .iter()
+        .map(|p| {
+            let class = names.iter().position(|c| *c == p.class).unwrap_or(0);
+            (format!("{} ({})", p.label, p.class), class)
+        })
+        .collect();
     let ok = |v: f64| v > 0.0 && v.is_finite();
     let mut points = Vec::new();
-    for p in results {
-        let class = names.iter().position(|c| *c == p.class).unwrap_or(0);
+    for (pixel, p) in results.iter().enumerate() {
         for c in &p.cells {
             let (x, y) = (c.measured_rmse.value, c.predicted_rmse.value);
             if !(ok(x) && ok(y)) {
@@ -595,7 +602,7 @@ fn write_plot(path: &Path, results: &[PixelResult]) -> Result<bool> {
                 _ => None,
             };
             points.push(Point {
-                class,
+                pixel,
                 x,
                 y,
                 x_interval: interval(c.measured_rmse.low, c.measured_rmse.high),
@@ -611,7 +618,7 @@ fn write_plot(path: &Path, results: &[PixelResult]) -> Result<bool> {
     let mut buf = vec![0u8; w as usize * h as usize * 3];
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        draw(&root, &points, &names)
+        draw(&root, &points, &series)
             .and_then(|()| root.present())
             .map_err(|e| Error::Io {
                 path: path.display().to_string(),
@@ -632,7 +639,7 @@ type DrawResult = std::result::Result<
     DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>,
 >;
 
-fn draw(root: &Area<'_>, points: &[Point], names: &[&str]) -> DrawResult {
+fn draw(root: &Area<'_>, points: &[Point], series: &[(String, usize)]) -> DrawResult {
     root.fill(&WHITE)?;
     let font = |size: f64| FontDesc::new(FontFamily::Name(FONT), size, FontStyle::Normal);
     let bold = FontDesc::new(FontFamily::Name(FONT), 22.0, FontStyle::Bold);
@@ -694,7 +701,7 @@ fn draw(root: &Area<'_>, points: &[Point], names: &[&str]) -> DrawResult {
         )))?;
     }
     for p in points {
-        let colour = PALETTE[p.class % PALETTE.len()].mix(0.7);
+        let colour = PALETTE[p.pixel % PALETTE.len()].mix(0.7);
         if let Some((l, h)) = p.x_interval {
             chart.draw_series(std::iter::once(PathElement::new(
                 vec![(l, p.y), (h, p.y)],
@@ -708,12 +715,11 @@ fn draw(root: &Area<'_>, points: &[Point], names: &[&str]) -> DrawResult {
             )))?;
         }
     }
-    // Colour and shape both tell the classes apart.
-    for (k, name) in names.iter().enumerate() {
-        let colour = PALETTE[k % PALETTE.len()];
-        let at = points.iter().filter(|p| p.class == k).map(|p| (p.x, p.y));
-        let name = name.to_string();
-        match k % 5 {
+    for (i, (name, class)) in series.iter().enumerate() {
+        let colour = PALETTE[i % PALETTE.len()];
+        let at = points.iter().filter(|p| p.pixel == i).map(|p| (p.x, p.y));
+        let name = name.clone();
+        match class % 5 {
             0 => {
                 chart
                     .draw_series(at.map(|c| Circle::new(c, 5, colour.filled())))?
