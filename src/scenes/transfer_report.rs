@@ -190,6 +190,11 @@ pub struct Agreement {
     pub significant: usize,
     /// Cells with a standard error for the prediction error.
     pub with_se: usize,
+    /// Median and largest |prediction error| over the cells where neither side is
+    /// tail-dominated (their spread does not rest on a handful of trials or renders).
+    pub held_pe: Option<(f64, f64)>,
+    /// Cells where neither side is tail-dominated.
+    pub held: usize,
     /// Median |predicted - measured relative bias|.
     pub median_bias: f64,
     /// Largest and where.
@@ -206,6 +211,12 @@ pub fn agreement(cells: &[(&str, &Cell)]) -> Option<Agreement> {
     let pe: Vec<f64> = cells.iter().map(|(_, c)| c.prediction_error()).collect();
     let bias: Vec<f64> = cells.iter().map(|(_, c)| c.bias_difference()).collect();
     let (median_pe, max_pe, at_pe) = median_max(&pe)?;
+    let held: Vec<f64> = cells
+        .iter()
+        .filter(|(_, c)| c.measured_rmse_caveat.is_none() && c.predicted_rmse_caveat.is_none())
+        .map(|(_, c)| c.prediction_error())
+        .collect();
+    let held_pe = median_max(&held).map(|(m, x, _)| (m, x));
     let (median_bias, max_bias, at_bias) = median_max(&bias).unwrap_or((f64::NAN, f64::NAN, 0));
     let mut significant = 0;
     let mut with_se = 0;
@@ -222,6 +233,8 @@ pub fn agreement(cells: &[(&str, &Cell)]) -> Option<Agreement> {
         cells: cells.len(),
         median_pe,
         max_pe: (max_pe, where_(at_pe)),
+        held_pe,
+        held: held.len(),
         significant,
         with_se,
         median_bias,
@@ -314,15 +327,17 @@ pub fn summary_md(exp: &TransferExperiment, results: &[PixelResult], info: &RunI
     let _ = writeln!(
         md,
         "Over every estimator and n of the class's pixels: the median and largest |prediction \
-         error|, how many cells' prediction error lies more than 1.96 standard errors from 0 \
+         error| (also over the cells where neither side's relative RMSE is tail-dominated, i.e. rests on \
+         a handful of trials or renders), how many cells' prediction error lies more than 1.96 \
+         standard errors from 0 \
          (both sides' Monte Carlo error; the fit's own error is not in it), and the same for \
          |predicted − measured relative bias|.\n"
     );
     let _ = writeln!(
         md,
-        "| class | pixels | cells | median abs. pred. error | largest (where) | beyond 1.96 SE | median abs. bias diff. | largest (where) |"
+        "| class | pixels | cells | median abs. pred. error | largest (where) | median, largest where neither side is tail-dominated (cells) | beyond 1.96 SE | median abs. bias diff. | largest (where) |"
     );
-    let _ = writeln!(md, "|---|---:|---:|---:|---|---:|---:|---|");
+    let _ = writeln!(md, "|---|---:|---:|---:|---|---|---:|---:|---|");
     let mut groups: Vec<(String, Vec<&PixelResult>)> = classes(results)
         .into_iter()
         .map(|c| {
@@ -341,12 +356,18 @@ pub fn summary_md(exp: &TransferExperiment, results: &[PixelResult], info: &RunI
         if let Some(a) = agreement(&cells) {
             let _ = writeln!(
                 md,
-                "| {name} | {} | {} | {} | {} ({}) | {} of {} | {} | {} ({}) |",
+                "| {name} | {} | {} | {} | {} ({}) | {} ({}) | {} of {} | {} | {} ({}) |",
                 pixels.len(),
                 a.cells,
                 abs_pct(a.median_pe),
                 abs_pct(a.max_pe.0),
                 a.max_pe.1,
+                a.held_pe.map_or("–".into(), |(m, x)| format!(
+                    "{}, {}",
+                    abs_pct(m),
+                    abs_pct(x)
+                )),
+                a.held,
                 a.significant,
                 a.with_se,
                 abs_pct(a.median_bias),
