@@ -9,6 +9,7 @@ mod reference;
 mod render;
 mod run;
 mod scenes;
+mod transfer;
 
 use clap::{Parser, Subcommand};
 use fireflies::Result;
@@ -48,6 +49,8 @@ enum Command {
     Compare(compare::CompareArgs),
     /// Every estimator on real scenes against references: convergence, the seeds' tables, plots.
     Scenes(scenes::ScenesArgs),
+    /// Do synthetic results transfer to scenes? Harness predictions on fitted pixels vs renders.
+    Transfer(transfer::TransferArgs),
 }
 
 /// Runs the chosen subcommand; `Err` exits with status 2.
@@ -63,6 +66,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Reference(args)) => reference::run(&args, memory),
         Some(Command::Compare(args)) => compare::run(&args),
         Some(Command::Scenes(args)) => scenes::run(&args, memory),
+        Some(Command::Transfer(args)) => transfer::run(&args, memory),
         None => run::run(&run::RunArgs::default(), memory),
     }
 }

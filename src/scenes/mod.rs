@@ -6,6 +6,8 @@
 //! [`experiment`] reads the TOML schema, [`run`] does one scene (reference, render, metrics,
 //! costs, delayed fractions), [`cost`] measures what estimators cost next to tracing,
 //! [`tables`] turns rows into tables and [`plots`] into figures; [`report`] writes them.
+//! [`transfer`] is the loop between real pixels and the synthetic harness (`fireflies
+//! transfer`), [`transfer_report`] writes its report.
 
 pub mod cost;
 pub mod experiment;
@@ -13,6 +15,8 @@ pub mod plots;
 pub mod report;
 pub mod run;
 pub mod tables;
+pub mod transfer;
+pub mod transfer_report;
 
 pub use experiment::{Scene, ScenesExperiment};
 pub use report::{RunInfo, write_report};
