@@ -296,7 +296,11 @@ dist = { kind = "preset", name = "caustic" }
     for est in [zirr, "pajot-rot:learn=50"] {
         for metric in [Metric::RelativeBias, Metric::Mse, Metric::Variance] {
             let r = find(&rows, "caustic", est, 16, metric);
-            assert_eq!(r.caveat, Some(Caveat::TailDominated), "{est} {metric}: {r:?}");
+            assert_eq!(
+                r.caveat,
+                Some(Caveat::TailDominated),
+                "{est} {metric}: {r:?}"
+            );
             assert!(r.ci_low.is_none() && r.se.is_none(), "{r:?}");
         }
     }

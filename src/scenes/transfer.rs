@@ -905,8 +905,10 @@ pub fn transfer_pixel(
             let m = acc.metrics(truth.mean).ok_or_else(|| {
                 Error::param("renders", s.renders, "too few renders for an interval")
             })?;
-            let rmse_caveat = law::caveat(Metric::RelativeRmse, &m, None, false, false);
-            let bias_caveat = law::caveat(Metric::RelativeBias, &m, None, false, false);
+            // A real pixel has no known law: only the run's own tail-dominance applies.
+            let caveat = |metric| law::caveat(metric, &m, None, None, truth.mean, false, false);
+            let rmse_caveat = caveat(Metric::RelativeRmse);
+            let bias_caveat = caveat(Metric::RelativeBias);
             let strip = |iv: Interval, caveat: bool| {
                 if caveat {
                     // As the harness rows do: no interval and no standard error.
