@@ -834,7 +834,15 @@ impl CellAccumulator {
                         )
                         .max(e.top_share_by(k, |a| a * a)),
                     ],
-                    paired: self.paired_hists.each_ref().map(|h| h.top_share(0.0, k, 2)),
+                    paired: self.paired_hists.each_ref().map(|h| {
+                        // Differences at rounding level only: the estimator never parted from
+                        // the mean in this run, so what it does when it does is unseen.
+                        if h.quantile(1.0) <= ROUNDING_DIFFERENCE {
+                            1.0
+                        } else {
+                            h.top_share(0.0, k, 2)
+                        }
+                    }),
                 }
             },
         })
@@ -874,6 +882,11 @@ pub struct CellMetrics {
     pub top_share: TopShares,
 }
 
+/// The largest paired difference against the mean (relative units) that is still rounding:
+/// sums taken in another order differ by about 1e-16; an estimator that acts on a sample moves
+/// its estimate by a sample over n, 1e-2 or more.
+const ROUNDING_DIFFERENCE: f64 = 1e-12;
+
 /// A spread's top share, or 1 when the moments saw no spread at all (values that sit inside
 /// one histogram bin would otherwise look evenly spread).
 fn spread_share(moments: &Moments, share: f64) -> f64 {
@@ -897,7 +910,9 @@ pub struct TopShares {
     /// the rare trials that carry the true MSE, and its interval would be a point.
     pub error: [f64; 2],
     /// Of `sum d^2` for the paired differences `d` against the mean (absolute error, squared
-    /// error), taken around 0: a difference that is 0 but in a few trials rests on those.
+    /// error), taken around 0: a difference that is 0 but in a few trials rests on those; 1
+    /// when no difference exceeds rounding (Zirr on `diffuse`: the truth, -3.6e-6, comes from
+    /// rare trials where Zirr acts, and a run without one printed an interval of rounding noise).
     pub paired: [f64; 2],
 }
 
@@ -1055,6 +1070,43 @@ mod tests {
         let iv = Interval::non_negative(2.0, 1.0);
         assert!((iv.low.unwrap() - 16.0 / 17.534_546).abs() < 1e-5, "{iv:?}");
         assert!((iv.high.unwrap() - 16.0 / 2.179_731).abs() < 1e-5, "{iv:?}");
+    }
+
+    /// Paired differences at rounding level carry no evidence: the share is 1 (marked), while
+    /// real differences spread over many trials are not; and an MSE where every trial missed by
+    /// the same amount is marked through its spread, not its value.
+    #[test]
+    fn rounding_level_differences_and_constant_errors_are_no_evidence() {
+        let push_all = |pairs: &[(f64, f64)]| {
+            let mut acc = CellAccumulator::default();
+            for &(estimate, mean_estimate) in pairs {
+                let o = Observation {
+                    estimate,
+                    mean_estimate,
+                    outlier: false,
+                };
+                acc.push(o, 1.0, 1.0);
+            }
+            acc.metrics(1.0).unwrap().top_share
+        };
+        let rounding: Vec<(f64, f64)> = (0..1000)
+            .map(|i| {
+                let m = 0.5 + i as f64 / 1000.0;
+                (m * (1.0 + 2e-16), m)
+            })
+            .collect();
+        assert_eq!(push_all(&rounding).paired, [1.0, 1.0]);
+        let real: Vec<(f64, f64)> = (0..1000)
+            .map(|i| {
+                let m = 0.5 + i as f64 / 1000.0;
+                (m * if i % 2 == 0 { 0.9 } else { 1.05 }, m)
+            })
+            .collect();
+        let shares = push_all(&real).paired;
+        assert!(shares.iter().all(|&s| s < 0.1), "{shares:?}");
+        // Every trial returned 0: the error is exactly 1 everywhere.
+        let zeros: Vec<(f64, f64)> = (0..1000).map(|i| (0.0, 0.5 + i as f64 / 1000.0)).collect();
+        assert_eq!(push_all(&zeros).error, [1.0, 1.0]);
     }
 
     #[test]
