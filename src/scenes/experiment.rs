@@ -235,7 +235,7 @@ pub fn checkpoints(spp: u32, extras: &[u32]) -> Vec<u32> {
 }
 
 /// A plain file name: no separators, not `.`/`..`, not empty, no surrounding spaces.
-fn plain_name(name: &str) -> bool {
+pub(crate) fn plain_name(name: &str) -> bool {
     !name.is_empty()
         && name.trim() == name
         && name != "."

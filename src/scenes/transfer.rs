@@ -22,6 +22,7 @@
 //!
 //! The prediction error of a cell is `predicted / measured relative RMSE - 1`.
 
+use super::experiment::plain_name;
 use crate::dist::fit::fit;
 use crate::dist::{Dist, DistSpec};
 use crate::error::{Error, Result};
@@ -184,15 +185,6 @@ pub struct TransferExperiment {
     pub settings: Settings,
     /// The pixels.
     pub pixels: Vec<PixelSpec>,
-}
-
-/// A plain file name: no separators, not `.`/`..`, not empty, no surrounding spaces.
-fn plain_name(name: &str) -> bool {
-    !name.is_empty()
-        && name.trim() == name
-        && name != "."
-        && name != ".."
-        && !name.contains(['/', '\\', '\0'])
 }
 
 impl TransferExperiment {
