@@ -14,6 +14,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod atomic;
+pub mod denoise;
 pub mod dist;
 pub mod error;
 pub mod estimators;

@@ -1,6 +1,7 @@
 //! Subcommands of the `fireflies` binary; each lives in its own module.
 
 mod compare;
+mod denoise;
 mod eval;
 mod fit;
 mod gate;
@@ -49,6 +50,8 @@ enum Command {
     Compare(compare::CompareArgs),
     /// Every estimator on real scenes against references: convergence, the seeds' tables, plots.
     Scenes(scenes::ScenesArgs),
+    /// Denoise a `render --nfor` directory with NFOR (Bitterli et al. 2016).
+    Denoise(denoise::DenoiseArgs),
     /// Do synthetic results transfer to scenes? Harness predictions on fitted pixels vs renders.
     Transfer(transfer::TransferArgs),
 }
@@ -67,6 +70,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Compare(args)) => compare::run(&args),
         Some(Command::Scenes(args)) => scenes::run(&args, memory),
         Some(Command::Transfer(args)) => transfer::run(&args, memory),
+        Some(Command::Denoise(args)) => denoise::run(&args),
         None => run::run(&run::RunArgs::default(), memory),
     }
 }

@@ -1,0 +1,459 @@
+//! NFOR's collaborative first-order regression (Bitterli et al. 2016, §4 and §5.2).
+//!
+//! For every pixel `c`, the colour in its `(2R+1)²` window is fitted by weighted least squares
+//! as an affine function of the pixel offset and of the feature buffers; the weights are the
+//! NL-means weights of each neighbour's colour patch against `c`'s, from a guide image. The
+//! fitted model is evaluated at *every* pixel of the window, and each pixel's output is the
+//! weighted average of all the predictions made for it (collaborative filtering, as in Moon
+//! et al.'s weighted local regression).
+//!
+//! Choices the paper leaves open, as made here:
+//! * **Weights from several channels**: one weight per neighbour, the smallest of the colour
+//!   channels' NL-means weights (the largest channel distance), as in Bitterli's released code.
+//! * **Design matrix**: a constant, the offsets `Δx`, `Δy`, and each feature channel minus its
+//!   value at `c`, every non-constant column divided by its largest magnitude in the window
+//!   (so columns lie in `[−1, 1]`). This "normalisation in the window" does not change the fit
+//!   in exact arithmetic (the columns span the same space); it keeps the normal equations well
+//!   scaled. A column that is exactly constant in the window is dropped.
+//! * **Solver**: the normal equations `XᵀWX β = XᵀWY` in `f64`, by Cholesky (nalgebra), with a
+//!   ridge of [`RIDGE`]·Σw on the non-constant columns so that nearly collinear features (the
+//!   three normal components on a plane) stay solvable. Released code used pivoted QR; the
+//!   ridge moves a prediction by about `RIDGE` relative to the colour range. Should Cholesky
+//!   still fail, the pixel falls back to its weighted mean.
+//! * Neighbours whose weight underflows to 0 take no part (they would add nothing).
+
+use super::nlmeans::{
+    Guide, MIN_CENTER_WEIGHT, NlMeansParams, Rect, Scratch, TILE, patch_distances, tiles, weight,
+};
+use super::planes::Planes;
+use crate::error::{Error, Result};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+
+/// Ridge on the normalised normal equations, relative to the sum of weights.
+pub const RIDGE: f64 = 1e-6;
+
+/// What one tile contributes: weighted predictions and weights over the tile grown by `R`.
+struct TileSum {
+    rect: Rect,
+    acc: [Vec<f32>; 3],
+    wsum: Vec<f32>,
+}
+
+/// Filters the three colour channels of `image` by collaborative first-order regression on
+/// `features`, once per bandwidth of `bandwidths`, with NL-means weights (patch and window
+/// radii of `params`; its `k` is not used) from `guide` and its variance `guide_var`.
+///
+/// The patch distances are computed once, at `k = 1`, and divided by `k²` for each bandwidth.
+/// This equals the distance at `k` except where a per-pixel distance reaches the clamp (the
+/// patch's weight is then below e⁻²⁰⁰ at either `k`) or where both variances are near `ε`.
+pub fn collaborative_regression(
+    image: &Planes,
+    guide: &Planes,
+    guide_var: &Planes,
+    features: &Planes,
+    params: NlMeansParams,
+    bandwidths: &[f32],
+) -> Result<Vec<Planes>> {
+    for (p, what) in [
+        (guide, "the regression guide"),
+        (guide_var, "the guide's variance"),
+        (features, "the features"),
+    ] {
+        image.same_size(p, what)?;
+    }
+    if image.channels() != 3 || guide.channels() != guide_var.channels() {
+        return Err(Error::param(
+            "channels",
+            format!(
+                "{}/{}/{}",
+                image.channels(),
+                guide.channels(),
+                guide_var.channels()
+            ),
+            "the regression filters RGB with a guide and a variance of as many channels",
+        ));
+    }
+    for &k in bandwidths {
+        NlMeansParams::new(params.patch_radius, params.window_radius, k)?;
+    }
+    let (w, h) = (image.width(), image.height());
+    let mut acc = vec![Planes::zeros(w, h, 3); bandwidths.len()];
+    let mut wsum = vec![vec![0.0f32; w * h]; bandwidths.len()];
+    let all = tiles(w, h);
+    // One band of tiles at a time: their sums overlap only within a band and its neighbours,
+    // so memory stays a band of tile sums, not a weight per pixel and offset.
+    for band in all.chunk_by(|a, b| a.y0 == b.y0) {
+        let sums: Vec<Vec<TileSum>> = band
+            .par_iter()
+            .map_init(Workspace::default, |ws, &rect| {
+                ws.tile(image, guide, guide_var, features, params, bandwidths, rect)
+            })
+            .collect();
+        for per_k in sums {
+            for ((s, acc), wsum) in per_k.into_iter().zip(&mut acc).zip(&mut wsum) {
+                for y in s.rect.y0..s.rect.y1 {
+                    let i = (y - s.rect.y0) * s.rect.width();
+                    let o = y * w + s.rect.x0;
+                    let n = s.rect.width();
+                    for c in 0..3 {
+                        for (a, v) in acc.plane_mut(c)[o..o + n]
+                            .iter_mut()
+                            .zip(&s.acc[c][i..i + n])
+                        {
+                            *a += v;
+                        }
+                    }
+                    for (a, v) in wsum[o..o + n].iter_mut().zip(&s.wsum[i..i + n]) {
+                        *a += v;
+                    }
+                }
+            }
+        }
+    }
+    for (acc, wsum) in acc.iter_mut().zip(&wsum) {
+        for c in 0..3 {
+            for (v, s) in acc.plane_mut(c).iter_mut().zip(wsum) {
+                *v /= s;
+            }
+        }
+    }
+    Ok(acc)
+}
+
+/// Per-thread buffers of the regression.
+#[derive(Default)]
+struct Workspace {
+    scratch: Scratch,
+    /// Per offset, the patch distance (at `k = 1`) of each tile pixel's neighbour there.
+    dists: Vec<f32>,
+    /// The same as weights, for one bandwidth.
+    weights: Vec<f32>,
+    dist: Vec<f32>,
+    /// Gathered window: design columns, colours, weights.
+    cols: Vec<Vec<f32>>,
+    wcols: Vec<Vec<f32>>,
+    ys: [Vec<f32>; 3],
+    pred: [Vec<f32>; 3],
+    ws: Vec<f32>,
+    /// The window of the current centre.
+    window: Rect,
+    /// Design columns in use (the rest were constant in the window).
+    used: usize,
+}
+
+impl Workspace {
+    #[allow(clippy::too_many_arguments)]
+    fn tile(
+        &mut self,
+        image: &Planes,
+        guide: &Planes,
+        guide_var: &Planes,
+        features: &Planes,
+        params: NlMeansParams,
+        bandwidths: &[f32],
+        rect: Rect,
+    ) -> Vec<TileSum> {
+        let (w, h) = (image.width(), image.height());
+        let r = params.window_radius;
+        let side = 2 * r + 1;
+        let area = rect.area();
+        self.dists.clear();
+        self.dists.resize(side * side * area, f32::NEG_INFINITY);
+        self.dist.resize(TILE * TILE, 0.0);
+        for (o, (dy, dx)) in offsets(r).enumerate() {
+            let dmax = &mut self.dists[o * area..(o + 1) * area];
+            for c in 0..guide.channels() {
+                let g = Guide {
+                    value: guide.plane(c),
+                    var: guide_var.plane(c),
+                    width: w,
+                    height: h,
+                };
+                patch_distances(
+                    g,
+                    rect,
+                    dx,
+                    dy,
+                    params.patch_radius,
+                    1.0,
+                    &mut self.scratch,
+                    &mut self.dist,
+                );
+                for (m, d) in dmax.iter_mut().zip(&self.dist[..area]) {
+                    *m = m.max(*d);
+                }
+            }
+        }
+        let out = Rect {
+            x0: rect.x0.saturating_sub(r),
+            x1: (rect.x1 + r).min(w),
+            y0: rect.y0.saturating_sub(r),
+            y1: (rect.y1 + r).min(h),
+        };
+        let centre = r * side + r;
+        bandwidths
+            .iter()
+            .map(|&k| {
+                let scale = 1.0 / (k * k);
+                self.weights.clear();
+                self.weights
+                    .extend(self.dists.iter().map(|&d| weight(d * scale)));
+                for wt in &mut self.weights[centre * area..(centre + 1) * area] {
+                    *wt = wt.max(MIN_CENTER_WEIGHT);
+                }
+                let mut sum = TileSum {
+                    rect: out,
+                    acc: std::array::from_fn(|_| vec![0.0; out.area()]),
+                    wsum: vec![0.0; out.area()],
+                };
+                for y in rect.y0..rect.y1 {
+                    for x in rect.x0..rect.x1 {
+                        let t = (y - rect.y0) * rect.width() + (x - rect.x0);
+                        self.gather(image, features, r, area, (x, y), t);
+                        self.solve_and_spread(&mut sum);
+                    }
+                }
+                sum
+            })
+            .collect()
+    }
+
+    /// Collects the window of centre `(x, y)` (tile index `t`), row by row: weights (0 for
+    /// dissimilar pixels, which then add nothing), colours and the normalised design columns,
+    /// constant first, dropped columns moved past [`Self::used`].
+    #[allow(clippy::too_many_arguments)]
+    fn gather(
+        &mut self,
+        image: &Planes,
+        features: &Planes,
+        r: usize,
+        area: usize,
+        (x, y): (usize, usize),
+        t: usize,
+    ) {
+        let (w, h) = (image.width(), image.height());
+        let win = Rect {
+            x0: x.saturating_sub(r),
+            x1: (x + r + 1).min(w),
+            y0: y.saturating_sub(r),
+            y1: (y + r + 1).min(h),
+        };
+        self.window = win;
+        let n = win.area();
+        let ncols = 3 + features.channels();
+        self.cols.resize_with(ncols, Vec::new);
+        for v in self.ys.iter_mut().chain(self.cols.iter_mut()) {
+            v.clear();
+        }
+        self.ws.clear();
+        let side = 2 * r + 1;
+        for wy in win.y0..win.y1 {
+            let o_row = (wy + r - y) * side + r;
+            for wx in win.x0..win.x1 {
+                self.ws.push(self.weights[(o_row + wx - x) * area + t]);
+            }
+            let row = wy * w + win.x0..wy * w + win.x1;
+            for c in 0..3 {
+                self.ys[c].extend_from_slice(&image.plane(c)[row.clone()]);
+            }
+            self.cols[1].extend((win.x0..win.x1).map(|wx| wx as f32 - x as f32));
+            self.cols[2].extend(std::iter::repeat_n(wy as f32 - y as f32, win.width()));
+            for j in 0..features.channels() {
+                let f = features.plane(j);
+                let fc = f[y * w + x];
+                self.cols[3 + j].extend(f[row.clone()].iter().map(|v| v - fc));
+            }
+        }
+        self.cols[0].resize(n, 1.0);
+        let mut kept = 1;
+        for j in 1..ncols {
+            let scale = self.cols[j].iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            if scale > 0.0 && scale.is_finite() {
+                self.cols[j].iter_mut().for_each(|v| *v /= scale);
+                self.cols.swap(kept, j);
+                kept += 1;
+            }
+        }
+        self.used = kept;
+    }
+
+    /// Solves the weighted least squares of the gathered window and adds each prediction,
+    /// weighted, to `sum`.
+    fn solve_and_spread(&mut self, sum: &mut TileSum) {
+        let d = self.used;
+        let n = self.ws.len();
+        self.wcols.resize_with(d.max(self.wcols.len()), Vec::new);
+        for (wc, col) in self.wcols.iter_mut().zip(&self.cols[..d]) {
+            wc.clear();
+            wc.extend(col.iter().zip(&self.ws).map(|(x, wt)| x * wt));
+        }
+        let wsum: f64 = self.ws.iter().map(|&v| f64::from(v)).sum();
+        let gram = DMatrix::<f64>::from_fn(d, d, |i, j| {
+            let (a, b) = if i <= j { (i, j) } else { (j, i) };
+            let g = f64::from(dot(&self.wcols[a], &self.cols[b]));
+            if i == j && i > 0 { g + RIDGE * wsum } else { g }
+        });
+        let rhs = DMatrix::<f64>::from_fn(d, 3, |i, c| f64::from(dot(&self.wcols[i], &self.ys[c])));
+        let beta = match gram.cholesky() {
+            Some(ch) => ch.solve(&rhs),
+            None => {
+                let mut b = DMatrix::<f64>::zeros(d, 3);
+                for c in 0..3 {
+                    b[(0, c)] = rhs[(0, c)] / wsum;
+                }
+                b
+            }
+        };
+        // Weighted predictions, then row by row into the tile's sums.
+        for (c, pred) in self.pred.iter_mut().enumerate() {
+            pred.clear();
+            pred.resize(n, 0.0);
+            for (j, col) in self.cols[..d].iter().enumerate() {
+                let b = beta[(j, c)] as f32;
+                for (p, x) in pred.iter_mut().zip(col) {
+                    *p += x * b;
+                }
+            }
+            for (p, wt) in pred.iter_mut().zip(&self.ws) {
+                *p *= wt;
+            }
+        }
+        let win = self.window;
+        let (rw, ww) = (sum.rect.width(), win.width());
+        for (i, wy) in (win.y0..win.y1).enumerate() {
+            let k = (wy - sum.rect.y0) * rw + (win.x0 - sum.rect.x0);
+            let src = i * ww..(i + 1) * ww;
+            for c in 0..3 {
+                for (a, p) in sum.acc[c][k..k + ww]
+                    .iter_mut()
+                    .zip(&self.pred[c][src.clone()])
+                {
+                    *a += p;
+                }
+            }
+            for (a, p) in sum.wsum[k..k + ww].iter_mut().zip(&self.ws[src]) {
+                *a += p;
+            }
+        }
+    }
+}
+
+/// Window offsets `(dy, dx)`, row by row.
+fn offsets(r: usize) -> impl Iterator<Item = (isize, isize)> {
+    let r = r as isize;
+    (-r..=r).flat_map(move |dy| (-r..=r).map(move |dx| (dy, dx)))
+}
+
+/// A dot product in eight lanes, so that it vectorises.
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f32 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    acc.iter().sum::<f32>() + tail
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rgb(w: usize, h: usize, f: impl Fn(usize, usize) -> [f32; 3]) -> Planes {
+        let px: Vec<[f32; 3]> = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| f(x, y))
+            .collect();
+        Planes::from_planes(
+            w,
+            h,
+            (0..3).map(|c| px.iter().map(|p| p[c]).collect()).collect(),
+        )
+        .unwrap()
+    }
+
+    /// A colour that is exactly affine in the position and in a feature is reproduced exactly
+    /// (up to the ridge and f32 rounding), whatever the weights: first-order regression has no
+    /// bias on first-order signals.
+    #[test]
+    fn affine_signals_pass_unchanged() {
+        let (w, h) = (45, 38);
+        let feature = Planes::from_planes(
+            w,
+            h,
+            vec![
+                (0..w * h)
+                    .map(|i| ((i * 7919) % 13) as f32 / 13.0)
+                    .collect(),
+            ],
+        )
+        .unwrap();
+        let f = feature.plane(0).to_vec();
+        let image = rgb(w, h, |x, y| {
+            let v = f[y * w + x];
+            [
+                0.2 + 0.01 * x as f32 + 0.5 * v,
+                1.0 - 0.02 * y as f32,
+                0.3 * v,
+            ]
+        });
+        // A flat guide gives every neighbour weight 1: the fit sees whole windows.
+        let guide = rgb(w, h, |_, _| [1.0; 3]);
+        let var = Planes::zeros(w, h, 3);
+        let p = NlMeansParams::new(3, 4, 1.0).unwrap();
+        let out = collaborative_regression(&image, &guide, &var, &feature, p, &[1.0])
+            .unwrap()
+            .remove(0);
+        for c in 0..3 {
+            for (a, b) in out.plane(c).iter().zip(image.plane(c)) {
+                assert!((a - b).abs() < 2e-4, "channel {c}: {a} vs {b}");
+            }
+        }
+    }
+
+    /// Constant features (dropped columns) and a guide whose weights are all tiny leave a
+    /// constant image constant, with no NaN.
+    #[test]
+    fn degenerate_windows_stay_finite() {
+        let image = rgb(20, 9, |_, _| [0.5, 0.25, 0.0]);
+        let features = Planes::zeros(20, 9, 2);
+        let var = Planes::zeros(20, 9, 3);
+        let p = NlMeansParams::new(1, 3, 0.5).unwrap();
+        let out = collaborative_regression(&image, &image, &var, &features, p, &[0.5])
+            .unwrap()
+            .remove(0);
+        for c in 0..3 {
+            for (a, b) in out.plane(c).iter().zip(image.plane(c)) {
+                assert!((a - b).abs() < 1e-6);
+            }
+        }
+        let one = rgb(1, 1, |_, _| [2.0, 3.0, 4.0]);
+        let out = collaborative_regression(
+            &one,
+            &one,
+            &Planes::zeros(1, 1, 3),
+            &Planes::zeros(1, 1, 1),
+            p,
+            &[0.5, 1.0],
+        )
+        .unwrap()
+        .remove(1);
+        assert_eq!(out.plane(2), &[4.0]);
+    }
+
+    #[test]
+    fn dot_matches_the_plain_sum() {
+        let a: Vec<f32> = (0..21).map(|i| i as f32 * 0.5).collect();
+        let b: Vec<f32> = (0..21).map(|i| 3.0 - i as f32).collect();
+        let plain: f32 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+        assert_eq!(dot(&a, &b), plain);
+    }
+}
