@@ -127,17 +127,19 @@ struct Workspace {
     scratch: Scratch,
     /// Per offset, the patch distance (at `k = 1`) of each tile pixel's neighbour there.
     dists: Vec<f32>,
-    /// The same as weights, for one bandwidth.
-    weights: Vec<f32>,
     dist: Vec<f32>,
     /// Gathered window: design columns, colours, weights.
     cols: Vec<Vec<f32>>,
-    wcols: Vec<Vec<f32>>,
+    /// √w per window pixel, and the weighted columns packed for one matrix product.
+    scaled: Vec<f32>,
+    packed: Vec<f32>,
     ys: [Vec<f32>; 3],
     pred: [Vec<f32>; 3],
     ws: Vec<f32>,
-    /// The window of the current centre.
+    /// The window of the current centre, its patch distances, and the centre's index in it.
     window: Rect,
+    dwin: Vec<f32>,
+    centre: usize,
     /// Design columns in use (the rest were constant in the window).
     used: usize,
 }
@@ -191,36 +193,33 @@ impl Workspace {
             y0: rect.y0.saturating_sub(r),
             y1: (rect.y1 + r).min(h),
         };
-        let centre = r * side + r;
-        bandwidths
+        let mut sums: Vec<TileSum> = bandwidths
             .iter()
-            .map(|&k| {
-                let scale = 1.0 / (k * k);
-                self.weights.clear();
-                self.weights
-                    .extend(self.dists.iter().map(|&d| weight(d * scale)));
-                for wt in &mut self.weights[centre * area..(centre + 1) * area] {
-                    *wt = wt.max(MIN_CENTER_WEIGHT);
-                }
-                let mut sum = TileSum {
-                    rect: out,
-                    acc: std::array::from_fn(|_| vec![0.0; out.area()]),
-                    wsum: vec![0.0; out.area()],
-                };
-                for y in rect.y0..rect.y1 {
-                    for x in rect.x0..rect.x1 {
-                        let t = (y - rect.y0) * rect.width() + (x - rect.x0);
-                        self.gather(image, features, r, area, (x, y), t);
-                        self.solve_and_spread(&mut sum);
-                    }
-                }
-                sum
+            .map(|_| TileSum {
+                rect: out,
+                acc: std::array::from_fn(|_| vec![0.0; out.area()]),
+                wsum: vec![0.0; out.area()],
             })
-            .collect()
+            .collect();
+        // The window's columns do not depend on the bandwidth: gather once, solve per `k`.
+        for y in rect.y0..rect.y1 {
+            for x in rect.x0..rect.x1 {
+                let t = (y - rect.y0) * rect.width() + (x - rect.x0);
+                self.gather(image, features, r, area, (x, y), t);
+                for (sum, &k) in sums.iter_mut().zip(bandwidths) {
+                    let scale = 1.0 / (k * k);
+                    self.ws.clear();
+                    self.ws.extend(self.dwin.iter().map(|&d| weight(d * scale)));
+                    self.ws[self.centre] = self.ws[self.centre].max(MIN_CENTER_WEIGHT);
+                    self.solve_and_spread(sum);
+                }
+            }
+        }
+        sums
     }
 
-    /// Collects the window of centre `(x, y)` (tile index `t`), row by row: weights (0 for
-    /// dissimilar pixels, which then add nothing), colours and the normalised design columns,
+    /// Collects the window of centre `(x, y)` (tile index `t`), row by row: patch distances,
+    /// colours and the normalised design columns,
     /// constant first, dropped columns moved past [`Self::used`].
     #[allow(clippy::too_many_arguments)]
     fn gather(
@@ -246,12 +245,13 @@ impl Workspace {
         for v in self.ys.iter_mut().chain(self.cols.iter_mut()) {
             v.clear();
         }
-        self.ws.clear();
+        self.dwin.clear();
         let side = 2 * r + 1;
+        self.centre = (y - win.y0) * win.width() + (x - win.x0);
         for wy in win.y0..win.y1 {
             let o_row = (wy + r - y) * side + r;
             for wx in win.x0..win.x1 {
-                self.ws.push(self.weights[(o_row + wx - x) * area + t]);
+                self.dwin.push(self.dists[(o_row + wx - x) * area + t]);
             }
             let row = wy * w + win.x0..wy * w + win.x1;
             for c in 0..3 {
@@ -283,18 +283,24 @@ impl Workspace {
     fn solve_and_spread(&mut self, sum: &mut TileSum) {
         let d = self.used;
         let n = self.ws.len();
-        self.wcols.resize_with(d.max(self.wcols.len()), Vec::new);
-        for (wc, col) in self.wcols.iter_mut().zip(&self.cols[..d]) {
-            wc.clear();
-            wc.extend(col.iter().zip(&self.ws).map(|(x, wt)| x * wt));
+        // [√w·X | √w·Y], column-major; one matrix product gives XᵀWX and XᵀWY (nalgebra hands
+        // it to matrixmultiply, which uses the CPU's vector units).
+        self.scaled.clear();
+        self.scaled.extend(self.ws.iter().map(|w| w.sqrt()));
+        self.packed.clear();
+        for col in self.cols[..d].iter().chain(&self.ys) {
+            self.packed
+                .extend(col.iter().zip(&self.scaled).map(|(x, s)| x * s));
         }
+        let zt = DMatrix::from_row_slice(d, n, &self.packed[..d * n]);
+        let zy = DMatrix::from_column_slice(n, d + 3, &self.packed);
+        let moments = zt * zy;
         let wsum: f64 = self.ws.iter().map(|&v| f64::from(v)).sum();
         let gram = DMatrix::<f64>::from_fn(d, d, |i, j| {
-            let (a, b) = if i <= j { (i, j) } else { (j, i) };
-            let g = f64::from(dot(&self.wcols[a], &self.cols[b]));
+            let g = f64::from(moments[(i.min(j), i.max(j))]);
             if i == j && i > 0 { g + RIDGE * wsum } else { g }
         });
-        let rhs = DMatrix::<f64>::from_fn(d, 3, |i, c| f64::from(dot(&self.wcols[i], &self.ys[c])));
+        let rhs = DMatrix::<f64>::from_fn(d, 3, |i, c| f64::from(moments[(i, d + c)]));
         let beta = match gram.cholesky() {
             Some(ch) => ch.solve(&rhs),
             None => {
@@ -343,24 +349,6 @@ impl Workspace {
 fn offsets(r: usize) -> impl Iterator<Item = (isize, isize)> {
     let r = r as isize;
     (-r..=r).flat_map(move |dy| (-r..=r).map(move |dx| (dy, dx)))
-}
-
-/// A dot product in eight lanes, so that it vectorises.
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f32 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for l in 0..8 {
-            acc[l] += x[l] * y[l];
-        }
-    }
-    acc.iter().sum::<f32>() + tail
 }
 
 #[cfg(test)]
@@ -447,13 +435,5 @@ mod tests {
         .unwrap()
         .remove(1);
         assert_eq!(out.plane(2), &[4.0]);
-    }
-
-    #[test]
-    fn dot_matches_the_plain_sum() {
-        let a: Vec<f32> = (0..21).map(|i| i as f32 * 0.5).collect();
-        let b: Vec<f32> = (0..21).map(|i| 3.0 - i as f32).collect();
-        let plain: f32 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
-        assert_eq!(dot(&a, &b), plain);
     }
 }
