@@ -50,12 +50,15 @@ pub fn run(args: &DenoiseArgs) -> Result<ExitCode> {
         .variance
         .unwrap_or_else(|| VarianceSource::default_for(&source));
     let input = nfor_input(&buffers, &source, variance)?;
+    let (spp, seed) = (buffers.spp, buffers.seed);
+    drop(buffers);
     let load_s = start.elapsed().as_secs_f64();
     let params = NforParams::paper();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .map_err(|e| Error::param("threads", threads, e.to_string()))?;
+    let threads = pool.current_num_threads();
     let t = Instant::now();
     let out = pool.install(|| nfor(&input, &params))?;
     let denoise_s = t.elapsed().as_secs_f64();
@@ -69,8 +72,8 @@ pub fn run(args: &DenoiseArgs) -> Result<ExitCode> {
         "image": args.out.display().to_string(),
         "estimator": source.name(),
         "variance": variance,
-        "spp": buffers.spp,
-        "seed": buffers.seed.to_string(),
+        "spp": spp,
+        "seed": seed.to_string(),
         "width": w,
         "height": h,
         "threads": threads,
@@ -94,7 +97,7 @@ pub fn run(args: &DenoiseArgs) -> Result<ExitCode> {
         args.dir.display(),
         w,
         h,
-        buffers.spp,
+        spp,
         source.name(),
         denoise_s,
         denoise_s / megapixels,
