@@ -3,6 +3,9 @@
 
 use super::for_each_run;
 
+#[cfg(test)]
+mod reference;
+
 /// One mode of ADR's approximate distribution representation, in log-luminance units.
 ///
 /// A single mode has `count == 1` and `lo == hi`; an extended mode (`count >= 2`) stands for
@@ -168,6 +171,16 @@ impl Adr {
     /// After learning, adds a non-black `l` to the representation (docs/estimators.md §6.3). Returns whether
     /// `m` changed.
     pub(super) fn update(&mut self, l: f64) -> bool {
+        self.update_with(l, Adr::overlapped)
+    }
+
+    /// [`Adr::update`] with the overlap search given (the unit tests pass the reference).
+    #[inline(always)]
+    fn update_with(
+        &mut self,
+        l: f64,
+        overlapped: impl Fn(&Adr, f64, usize) -> Option<(usize, usize)>,
+    ) -> bool {
         // Most samples fall in the mode the previous one fell in: try it before searching.
         if let Some(md) = self.modes.get_mut(self.hint) {
             if md.is_extended() && md.lo <= l && l <= md.hi {
@@ -183,7 +196,7 @@ impl Adr {
                 return false;
             }
         }
-        let Some((a, b)) = self.overlapped(l, i) else {
+        let Some((a, b)) = overlapped(self, l, i) else {
             self.modes.insert(
                 i,
                 PajotMode {
@@ -213,112 +226,50 @@ impl Adr {
         self.m != old
     }
 
-    /// [`Adr::overlapped`] by materialising every point: the literal reading, kept as the
-    /// oracle of the unit tests.
-    #[cfg(test)]
-    pub(super) fn overlapped_naive(&self, l: f64, i: usize) -> Option<(usize, usize)> {
-        let total: u64 = self.modes.iter().map(|m| m.count).sum();
-        let mut xs = Vec::with_capacity(usize::try_from(total).unwrap_or(0).saturating_add(1));
-        for md in &self.modes[..i] {
-            xs.extend(md.points());
-        }
-        let pos = xs.len();
-        xs.push(l);
-        for md in &self.modes[i..] {
-            xs.extend(md.points());
-        }
-        let mut p = Vec::new();
-        let pilot = pilot(&xs, &mut p);
-        let h = |j: usize| pilot.map_or(0.0, |Pilot { nn, g }| nn * (g / p[j]).sqrt());
-        let h_l = h(pos);
-        let h_max = pilot.map_or(0.0, |Pilot { nn, g }| {
-            let p_min = p.iter().copied().fold(f64::INFINITY, f64::min);
-            nn * (g / p_min).sqrt()
-        });
-        let reach = h_l + h_max;
-        let hits = |j: usize| xs[j] == l || (l - xs[j]).abs() < h_l + h(j);
-
-        // Scan left of l, tracking which mode each point belongs to.
-        let mut first = None;
-        if i > 0 {
-            let mut mode = i - 1;
-            let mut start = pos - self.modes[mode].count as usize;
-            for j in (0..pos).rev() {
-                if xs[j] != l && !(l - xs[j] < reach) {
-                    break;
-                }
-                while j < start {
-                    mode -= 1;
-                    start -= self.modes[mode].count as usize;
-                }
-                if hits(j) {
-                    first = Some(mode);
-                }
-            }
-        }
-        let mut last = None;
-        if i < self.modes.len() {
-            let mut mode = i;
-            let mut end = pos + 1 + self.modes[mode].count as usize;
-            for (j, &x) in xs.iter().enumerate().skip(pos + 1) {
-                if x != l && !(x - l < reach) {
-                    break;
-                }
-                while j >= end {
-                    mode += 1;
-                    end += self.modes[mode].count as usize;
-                }
-                if hits(j) {
-                    last = Some(mode);
-                }
-            }
-        }
-        match (first, last) {
-            (None, None) => None,
-            (Some(a), None) => Some((a, i - 1)),
-            (None, Some(b)) => Some((i, b)),
-            (Some(a), Some(b)) => Some((a, b)),
-        }
-    }
-
     /// The range of modes (first, last) having a point that `l` overlaps under the eq. 4
     /// bandwidths of all modes' points plus `l`; `None` if no point overlaps. `i` is the index of
     /// the first mode whose top is `>= l` (`l` goes between modes `i - 1` and `i`).
     ///
-    /// The point set is never materialised (module doc, Cost): see [`PointSet`].
+    /// The point set is never materialised (module doc, decision 17): see [`Query`].
     pub(super) fn overlapped(&self, l: f64, i: usize) -> Option<(usize, usize)> {
-        let mut set = PointSet::new(&self.modes, l, i);
-        let Some((nn, g)) = set.pilot() else {
+        let q = Query {
+            modes: &self.modes,
+            l,
+            i,
+        };
+        let Some((nn, g)) = q.pilot() else {
             // Every bandwidth is 0: only a point equal to l overlaps it, and the only point
             // that can equal l is a single mode just after it.
             return self.modes.get(i).filter(|m| m.lo == l).map(|_| (i, i));
         };
-        let h = |s: usize, k: u64| nn * (g / set.p_at(s, k, nn)).sqrt();
-        let h_l = h(i, 0);
+        let h = |s: usize, seg: &Seg, k: u64| nn * (g / q.p_at(s, seg, k, nn)).sqrt();
+        let h_l = h(i, &q.seg(i, nn), 0);
         // Every p >= 1 (its own term), so no h exceeds nn sqrt(g).
         let reach = h_l + nn * g.sqrt();
-        let hits = |x: f64, s: usize, k: u64| x == l || (l - x).abs() < h_l + h(s, k);
+        let hits = |x: f64, s: usize, seg: &Seg, k: u64| x == l || (l - x).abs() < h_l + h(s, seg, k);
 
         let mut first = None;
         'left: for s in (0..i).rev() {
-            for k in set.order(s, true) {
-                let x = set.segs[s].at(k);
+            let seg = q.seg(s, nn);
+            for k in seg.nearest_first(true) {
+                let x = seg.at(k);
                 if x != l && !(l - x < reach) {
                     break 'left;
                 }
-                if hits(x, s, k) {
+                if hits(x, s, &seg, k) {
                     first = Some(s);
                 }
             }
         }
         let mut last = None;
-        'right: for s in i + 1..set.segs.len() {
-            for k in set.order(s, false) {
-                let x = set.segs[s].at(k);
+        'right: for s in i + 1..q.runs() {
+            let seg = q.seg(s, nn);
+            for k in seg.nearest_first(false) {
+                let x = seg.at(k);
                 if x != l && !(x - l < reach) {
                     break 'right;
                 }
-                if hits(x, s, k) {
+                if hits(x, s, &seg, k) {
                     last = Some(s - 1);
                 }
             }
@@ -334,7 +285,7 @@ impl Adr {
 
 /// One run of ADR's point set: a mode's evenly spaced points, or the newcomer alone.
 #[derive(Debug, Clone, Copy)]
-struct Seg {
+pub(super) struct Seg {
     lo: f64,
     hi: f64,
     c: u64,
@@ -352,6 +303,44 @@ impl Seg {
             0.0
         };
         Seg { lo, hi, c, d, w: 0 }
+    }
+
+    /// This run with its `w` for the mean nearest-neighbour distance `nn`.
+    pub(super) fn with_w(mut self, nn: f64) -> Seg {
+        self.w = if self.c < 2 {
+            0
+        } else if self.is_point() || nn / self.d > (self.c - 1) as f64 {
+            self.c - 1
+        } else {
+            // The largest integer j with j d < nn.
+            ((nn / self.d).ceil() - 1.0).max(0.0) as u64
+        };
+        self
+    }
+
+    /// The points of the run to test for overlap, nearest to the newcomer first (`from_top`:
+    /// the run lies below it). The interior points all share one bandwidth, so only the
+    /// nearest of them is listed: if it misses, the farther ones miss too.
+    pub(super) fn nearest_first(&self, from_top: bool) -> Nearest {
+        let (c, w) = (self.c, self.w);
+        // Ascending: the bottom points, the one interior point listed, the top points.
+        let (bottom, mid, top) = if self.is_point() {
+            (0..1, 0..0, c..c)
+        } else if self.has_interior() {
+            let m = if from_top { c - 2 - w } else { w + 1 };
+            (0..w + 1, m..m + 1, c - 1 - w..c)
+        } else {
+            (0..c, 0..0, c..c)
+        };
+        Nearest {
+            ranges: if from_top {
+                [top, mid, bottom]
+            } else {
+                [bottom, mid, top]
+            },
+            from_top,
+            at: 0,
+        }
     }
 
     /// Point `k` (docs/estimators.md §6.3's formula; the last one is `hi`).
@@ -376,79 +365,137 @@ impl Seg {
     }
 }
 
+/// Point indices of a run, nearest to the newcomer first ([`Seg::nearest_first`]): three
+/// ranges in turn, each walked downwards when the run lies below the newcomer.
+pub(super) struct Nearest {
+    ranges: [std::ops::Range<u64>; 3],
+    from_top: bool,
+    at: usize,
+}
+
+impl Iterator for Nearest {
+    type Item = u64;
+
+    fn next(&mut self) -> Option<u64> {
+        while let Some(r) = self.ranges.get_mut(self.at) {
+            let k = if self.from_top {
+                r.next_back()
+            } else {
+                r.next()
+            };
+            if k.is_some() {
+                return k;
+            }
+            self.at += 1;
+        }
+        None
+    }
+}
+
 /// `Σ_{j=1..w} (1 - (j r)^2)`: the Epanechnikov pilot terms of `w` evenly spaced neighbours at
 /// spacing `r` (in units of `nn`).
-fn kernel_sum(w: u64, r: f64) -> f64 {
+pub(super) fn kernel_sum(w: u64, r: f64) -> f64 {
     let w = w as f64;
     w - r * r * w * (w + 1.0) * (2.0 * w + 1.0) / 6.0
 }
 
-/// ADR's point set (every mode's points plus the newcomer) without materialising it.
+/// ADR's point set for one newcomer: the modes with `l` inserted as a single run at index `i`,
+/// read in place (run `t` is mode `t` below `i` and mode `t - 1` above it).
 ///
 /// An extended mode stands for `c` evenly spaced points; all but the `w + 1` at each end see
 /// exactly `w` neighbours on each side within `nn` and none outside the mode, so they share one
 /// pilot value `1 + 2 Σ_{j<=w} (1 - (j d / nn)^2)`. Those are counted in closed form; the end
-/// points, and points whose window reaches another mode, are evaluated one by one. Same-mode
+/// points, and points whose window reaches another run, are evaluated one by one. Same-mode
 /// neighbours are taken at the exact spacing `d`, which differs from the rounded point values
-/// by a rounding error; a neighbour at the window's edge contributes ~0 either way. Cost per
-/// newcomer: `O(modes + Σ min(c, w))` instead of `O(n)` points.
-struct PointSet {
-    segs: Vec<Seg>,
-    /// Number of points.
-    k: f64,
+/// by a rounding error; a neighbour at the window's edge contributes ~0 either way.
+///
+/// Cost per newcomer: `O(modes + Σ min(c, w))` floating-point operations and one `ln` per
+/// extended mode, without allocating. An end point whose run lies at least `nn` from both
+/// neighbouring runs has no term from them, so its pilot value is the in-mode part alone; the
+/// checks that prove this use the run's extreme points, so the values are those of a walk
+/// over the neighbours (the unit tests compare with such a walk bit for bit).
+#[derive(Clone, Copy)]
+struct Query<'a> {
+    modes: &'a [PajotMode],
+    l: f64,
+    i: usize,
 }
 
-impl PointSet {
-    fn new(modes: &[PajotMode], l: f64, i: usize) -> PointSet {
-        let mut segs = Vec::with_capacity(modes.len() + 1);
-        segs.extend(modes[..i].iter().map(|m| Seg::new(m.lo, m.hi, m.count)));
-        segs.push(Seg::new(l, l, 1));
-        segs.extend(modes[i..].iter().map(|m| Seg::new(m.lo, m.hi, m.count)));
-        let k = modes.iter().map(|m| m.count as f64).sum::<f64>() + 1.0;
-        PointSet { segs, k }
+impl Query<'_> {
+    /// Number of runs (modes plus the newcomer).
+    fn runs(&self) -> usize {
+        self.modes.len() + 1
     }
 
-    /// `nn` and `g` of eq. 4, or `None` when every bandwidth is 0. Sets each run's `w`.
-    fn pilot(&mut self) -> Option<(f64, f64)> {
-        if self.k < 2.0 {
-            return None;
-        }
-        // Mean distance to the nearest other point.
-        let n = self.segs.len();
-        let mut nn_sum = 0.0;
-        for s in 0..n {
-            let seg = self.segs[s];
-            let prev = if s > 0 {
-                seg.lo - self.segs[s - 1].hi
-            } else {
-                f64::INFINITY
-            };
-            let next = if s + 1 < n {
-                self.segs[s + 1].lo - seg.hi
-            } else {
-                f64::INFINITY
-            };
-            if seg.c == 1 {
-                nn_sum += prev.min(next);
-            } else {
-                nn_sum += prev.min(seg.at(1) - seg.lo);
-                nn_sum += next.min(seg.hi - seg.at(seg.c - 2));
-                nn_sum += (seg.c - 2) as f64 * seg.d;
+    /// `(lo, hi, count)` of run `t`.
+    #[inline(always)]
+    fn run(&self, t: usize) -> (f64, f64, u64) {
+        use std::cmp::Ordering::*;
+        match t.cmp(&self.i) {
+            Less => {
+                let m = &self.modes[t];
+                (m.lo, m.hi, m.count)
+            }
+            Equal => (self.l, self.l, 1),
+            Greater => {
+                let m = &self.modes[t - 1];
+                (m.lo, m.hi, m.count)
             }
         }
-        let nn = nn_sum / self.k;
-        if !(nn > 0.0 && nn.is_finite()) {
+    }
+
+    /// Run `t` with its `w` for the mean nearest-neighbour distance `nn`.
+    #[inline]
+    fn seg(&self, t: usize, nn: f64) -> Seg {
+        let (lo, hi, c) = self.run(t);
+        Seg::new(lo, hi, c).with_w(nn)
+    }
+
+    /// Number of points, as the sum of the counts in `f64` plus one.
+    fn points(&self) -> f64 {
+        let mut total: u64 = 0;
+        for m in self.modes {
+            total = total.saturating_add(m.count);
+        }
+        if total < 1 << 52 {
+            // Every partial sum of the f64 counts is an exact integer: the same value.
+            total as f64 + 1.0
+        } else {
+            self.modes.iter().map(|m| m.count as f64).sum::<f64>() + 1.0
+        }
+    }
+
+    /// `nn` and `g` of eq. 4, or `None` when every bandwidth is 0.
+    fn pilot(&self) -> Option<(f64, f64)> {
+        let k = self.points();
+        if k < 2.0 {
             return None;
         }
-        for seg in &mut self.segs {
-            seg.w = if seg.c < 2 {
-                0
-            } else if seg.is_point() || nn / seg.d > (seg.c - 1) as f64 {
-                seg.c - 1
+        // Mean distance to the nearest other point, summed run by run in order.
+        let n = self.runs();
+        let mut nn_sum = 0.0;
+        let mut prev = f64::INFINITY;
+        let mut cur = self.run(0);
+        for t in 0..n {
+            let next_run = (t + 1 < n).then(|| self.run(t + 1));
+            let (lo, hi, c) = cur;
+            let next = next_run.map_or(f64::INFINITY, |r| r.0 - hi);
+            if c == 1 {
+                nn_sum += prev.min(next);
             } else {
-                // The largest integer j with j d < nn.
-                ((nn / seg.d).ceil() - 1.0).max(0.0) as u64
-            };
+                let seg = Seg::new(lo, hi, c);
+                nn_sum += prev.min(seg.at(1) - lo);
+                nn_sum += next.min(hi - seg.at(c - 2));
+                nn_sum += (c - 2) as f64 * seg.d;
+            }
+            prev = next;
+            if let Some(r) = next_run {
+                cur = r;
+            }
+        }
+        let nn = nn_sum / k;
+        if !(nn > 0.0 && nn.is_finite()) {
+            return None;
         }
         // ln g = mean of ln p, as logs of partial products (every p >= 1).
         let mut ln_sum = 0.0;
@@ -460,30 +507,56 @@ impl PointSet {
                 product = 1.0;
             }
         };
+        let mut prev_hi = f64::NAN;
         for s in 0..n {
-            let seg = self.segs[s];
-            if seg.c >= 2 && seg.is_point() {
-                ln_sum += seg.c as f64 * self.p_at(s, 0, nn).ln();
-            } else if seg.has_interior() {
-                for k in (0..=seg.w).chain(seg.c - 1 - seg.w..seg.c) {
-                    take(self.p_at(s, k, nn), &mut ln_sum);
-                }
-                let interior = (seg.c - 2 * seg.w - 2) as f64;
-                ln_sum += interior * (1.0 + 2.0 * kernel_sum(seg.w, seg.d / nn)).ln();
+            let seg = self.seg(s, nn);
+            let next_lo = if s + 1 < n {
+                self.run(s + 1).0
             } else {
-                for k in 0..seg.c {
-                    take(self.p_at(s, k, nn), &mut ln_sum);
+                f64::NAN
+            };
+            if seg.c == 1 {
+                // p = 1 unless a neighbour lies within nn (x = lo = hi); a factor 1 changes
+                // nothing.
+                if s > 0 && seg.lo - prev_hi < nn || s + 1 < n && next_lo - seg.lo < nn {
+                    take(self.p_at(s, &seg, 0, nn), &mut ln_sum);
+                }
+            } else if seg.is_point() {
+                ln_sum += seg.c as f64 * self.p_at(s, &seg, 0, nn).ln();
+            } else {
+                let alone = (s == 0 || !(seg.lo - prev_hi < nn))
+                    && (s + 1 == n
+                        || !(next_lo - seg.hi < nn) && !(next_lo - seg.at(seg.c - 2) < nn));
+                let (c, w) = (seg.c, seg.w);
+                let r = seg.d / nn;
+                let p = |k: u64| {
+                    if alone {
+                        1.0 + (kernel_sum(k.min(w), r) + kernel_sum((c - 1 - k).min(w), r))
+                    } else {
+                        self.p_at(s, &seg, k, nn)
+                    }
+                };
+                if seg.has_interior() {
+                    for k in (0..=w).chain(c - 1 - w..c) {
+                        take(p(k), &mut ln_sum);
+                    }
+                    let interior = (c - 2 * w - 2) as f64;
+                    ln_sum += interior * (1.0 + 2.0 * kernel_sum(w, r)).ln();
+                } else {
+                    for k in 0..c {
+                        take(p(k), &mut ln_sum);
+                    }
                 }
             }
+            prev_hi = seg.hi;
         }
         ln_sum += product.ln();
-        Some((nn, (ln_sum / self.k).exp()))
+        Some((nn, (ln_sum / k).exp()))
     }
 
-    /// The pilot `p` at point `k` of run `s`: itself, its own run's neighbours within `nn`, and
-    /// other runs' points within `nn`.
-    fn p_at(&self, s: usize, k: u64, nn: f64) -> f64 {
-        let seg = self.segs[s];
+    /// The pilot `p` at point `k` of run `s` (`seg`, with its `w`): itself, its own run's
+    /// neighbours within `nn`, and other runs' points within `nn`.
+    fn p_at(&self, s: usize, seg: &Seg, k: u64, nn: f64) -> f64 {
         let x = seg.at(k);
         let mut p = 1.0;
         if seg.c >= 2 {
@@ -495,14 +568,14 @@ impl PointSet {
             }
         }
         for t in (0..s).rev() {
-            let (sum, done) = Self::from_run(&self.segs[t], x, nn, true);
+            let (sum, done) = self.from_run(t, x, nn, true);
             p += sum;
             if done {
                 break;
             }
         }
-        for t in s + 1..self.segs.len() {
-            let (sum, done) = Self::from_run(&self.segs[t], x, nn, false);
+        for t in s + 1..self.runs() {
+            let (sum, done) = self.from_run(t, x, nn, false);
             p += sum;
             if done {
                 break;
@@ -511,18 +584,16 @@ impl PointSet {
         p
     }
 
-    /// Pilot terms at `x` from the points of another run lying below (`below`) or above it;
+    /// Pilot terms at `x` from the points of run `t` lying below (`below`) or above it;
     /// `done` when runs further away cannot contribute.
-    fn from_run(seg: &Seg, x: f64, nn: f64, below: bool) -> (f64, bool) {
+    fn from_run(&self, t: usize, x: f64, nn: f64, below: bool) -> (f64, bool) {
+        let (lo, hi, c) = self.run(t);
         // Distances from x to the run's near and far ends.
-        let (near, far) = if below {
-            (x - seg.hi, x - seg.lo)
-        } else {
-            (seg.lo - x, seg.hi - x)
-        };
+        let (near, far) = if below { (x - hi, x - lo) } else { (lo - x, hi - x) };
         if !(near < nn) {
             return (0.0, true);
         }
+        let seg = Seg::new(lo, hi, c);
         if far < nn {
             // The whole run is inside the window: Σ_j (1 - ((near + j d) / nn)^2) in closed
             // form, j = 0..c-1.
@@ -546,34 +617,5 @@ impl PointSet {
             sum += 1.0 - r * r;
         }
         (sum, true)
-    }
-
-    /// The points of run `s` to test for overlap, nearest to the newcomer first (`from_top`:
-    /// the run lies below it). The interior points all share one bandwidth, so only the
-    /// nearest of them is listed: if it misses, the farther ones miss too.
-    fn order(&self, s: usize, from_top: bool) -> Vec<u64> {
-        let seg = self.segs[s];
-        let (c, w) = (seg.c, seg.w);
-        let ks: Vec<u64> = if seg.is_point() {
-            vec![0]
-        } else if seg.has_interior() {
-            (0..=w).chain([w + 1]).chain(c - 1 - w..c).collect()
-        } else {
-            (0..c).collect()
-        };
-        if from_top {
-            // Mirror: nearest is the top; the interior's nearest is c - 2 - w.
-            if seg.has_interior() {
-                (c - 1 - w..c)
-                    .rev()
-                    .chain([c - 2 - w])
-                    .chain((0..=w).rev())
-                    .collect()
-            } else {
-                ks.into_iter().rev().collect()
-            }
-        } else {
-            ks
-        }
     }
 }

@@ -366,3 +366,136 @@ fn adr_update_inside_an_extended_mode_only_counts() {
         }]
     );
 }
+
+#[test]
+#[ignore]
+fn tmp_stats() {
+    use crate::dist::Preset;
+    use rand::SeedableRng;
+    use crate::Estimator;
+    for (preset, spp) in [(Preset::Firefly, 1024), (Preset::Firefly, 4096), (Preset::Caustic, 1024)] {
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(0xbe7c_4000 + spp as u64);
+        let mut out = vec![0.0; spp * 8];
+        preset.dist().fill(&mut rng, &mut out);
+        let ts = [1e-6, 1e-3, 1e-2, 0.05, 0.1, 0.3];
+        let mut unc = [0u64; 6];
+        let (mut calls, mut segs, mut gsum, mut ext) = (0u64, 0u64, 0.0, 0u64);
+        for px in out.chunks(spp) {
+            let mut e = super::PajotAdr::new(50).unwrap();
+            for (j, &s) in px.iter().enumerate() {
+                if j >= 50 && s != 0.0 {
+                    let l = s.ln();
+                    let modes = &e.adr.modes;
+                    let i = modes.partition_point(|md| md.hi < l);
+                    let inside = modes.get(i).is_some_and(|m| m.is_extended() && m.lo <= l);
+                    if !inside {
+                        calls += 1;
+                        segs += modes.len() as u64;
+                        ext += modes.iter().filter(|m| m.is_extended()).count() as u64;
+                        let mut xs: Vec<f64> = modes.iter().flat_map(|m| m.points().collect::<Vec<_>>()).collect();
+                        xs.push(l);
+                        xs.sort_by(f64::total_cmp);
+                        let h = adr_bandwidths(&xs);
+                        let me = xs.iter().position(|&x| x == l).unwrap();
+                        let hmax = h.iter().cloned().fold(0.0, f64::max);
+                        let mut best = f64::INFINITY;
+                        for jj in 0..xs.len() {
+                            if jj == me || xs[jj] == l { continue; }
+                            let d = (xs[jj]-l).abs();
+                            if d > 1.5 * (h[me] + hmax) { continue; }
+                            let r = d / (h[me] + h[jj]);
+                            best = best.min((r - 1.0).abs());
+                        }
+                        for (t, u) in ts.iter().zip(unc.iter_mut()) { if best < *t { *u += 1; } }
+                        // g estimate: h = nn sqrt(g/p) -> g = ...
+                        let _ = &mut gsum;
+                    }
+                }
+                e.push(s);
+            }
+        }
+        println!("{preset:?} {spp}: calls {calls} modes {:.1} ext {:.1} uncertain at {ts:?}: {:?}", segs as f64 / calls as f64, ext as f64 / calls as f64, unc.iter().map(|&u| u as f64 / calls as f64).collect::<Vec<_>>());
+    }
+}
+
+/// Heavy-tailed log-luminances with ties: a lognormal body, exact repeats, values one ulp apart,
+/// a Pareto tail, and the extremes `ln 1e-300`, `ln 1e300`.
+fn hard_log(rng: &mut Mix, repeats: &[f64]) -> f64 {
+    let u = |rng: &mut Mix| ((rng.next() >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+    match rng.next() % 16 {
+        0..=6 => {
+            // Box-Muller normal
+            let (a, b) = (u(rng), u(rng));
+            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+        }
+        7..=9 => rng.pick(repeats),
+        10 => f64::from_bits(rng.pick(repeats).to_bits() + 1 + rng.next() % 3),
+        11 | 12 => 3.0 - u(rng).ln() / 1.1,
+        13 => 1e-300f64.ln(),
+        14 => 1e300f64.ln(),
+        _ => rng.uniform(-3.0, 3.0),
+    }
+}
+
+/// ADR's fast overlap search equals the first implicit form bit for bit (no tie is skipped),
+/// on random mode sets and on the modes of heavy-tailed streams.
+#[test]
+fn adr_overlapped_equals_reference() {
+    let mut rng = Mix(5);
+    let mut merged = 0;
+    for _ in 0..60_000 {
+        let modes = random_modes(&mut rng);
+        let options = [
+            rng.uniform(-1.0, 9.0),
+            modes[0].lo,
+            modes[modes.len() - 1].hi,
+            rng.pick(&modes).hi,
+            rng.pick(&modes).lo,
+        ];
+        let l = rng.pick(&options);
+        let i = modes.partition_point(|m| m.hi < l);
+        if modes.get(i).is_some_and(|m| m.is_extended() && m.lo <= l) {
+            continue;
+        }
+        let adr = Adr {
+            modes,
+            ..Adr::NEW
+        };
+        let want = adr.overlapped_ref(l, i);
+        assert_eq!(adr.overlapped(l, i), want, "l = {l}, modes = {:?}", adr.modes);
+        merged += usize::from(want.is_some());
+    }
+    assert!(merged > 8_000, "{merged} merged");
+}
+
+/// Whole streams: ADR through the fast search and through the reference end with the same
+/// modes and bound after every sample, on heavy-tailed streams with ties and extremes.
+#[test]
+fn adr_updates_equal_reference_on_hard_streams() {
+    let mut rng = Mix(17);
+    let mut calls = 0u64;
+    for round in 0..400 {
+        let repeats: Vec<f64> = (0..4).map(|_| hard_log(&mut rng, &[0.0])).collect();
+        let learn = rng.next() % 60;
+        let n = 50 + rng.next() % 700;
+        let mut logs: Vec<f64> = (0..n).map(|_| hard_log(&mut rng, &repeats)).collect();
+        if round % 4 == 0 {
+            // Scale like a far-off pixel: the same decisions up to rounding, new roundings.
+            let (a, b) = (rng.uniform(0.01, 40.0), rng.uniform(-300.0, 300.0));
+            logs.iter_mut().for_each(|l| *l = a * *l + b);
+        }
+        let (learning, rest) = logs.split_at(learn.min(n) as usize);
+        let mut sorted = learning.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let (mut fast, mut slow) = (Adr::NEW, Adr::NEW);
+        assert_eq!(fast.learn_end(&sorted), slow.learn_end(&sorted));
+        for &l in rest {
+            let before = fast.modes.len();
+            assert_eq!(fast.update(l), slow.update_ref(l));
+            assert_eq!(fast.modes, slow.modes, "round {round}, l = {l}");
+            assert_eq!(fast.m.to_bits(), slow.m.to_bits());
+            calls += u64::from(fast.modes.len() != before);
+        }
+    }
+    assert!(calls > 4_000, "{calls} searches changed the modes");
+}
