@@ -116,11 +116,95 @@ fn pilot(xs: &[f64], p: &mut Vec<f64>) -> Option<Pilot> {
     Some(Pilot { nn, g })
 }
 
+/// A mode as ADR keeps it: the public triple plus the spacing and next-to-last point that the
+/// overlap search reads, computed once per change of the mode rather than once per search.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Mode {
+    pub(super) lo: f64,
+    pub(super) hi: f64,
+    pub(super) count: u64,
+    /// `(hi - lo) / (count - 1)` (0 for a single); NaN while stale, after `count` changed.
+    d: f64,
+    /// Point `count - 2` ([`Seg::at`]); `lo` for a single.
+    top: f64,
+}
+
+impl Mode {
+    /// A run below every point, bounding a query's walks.
+    const SENTINEL_BELOW: Mode = Mode {
+        lo: f64::NEG_INFINITY,
+        hi: f64::NEG_INFINITY,
+        count: 0,
+        d: 0.0,
+        top: f64::NEG_INFINITY,
+    };
+
+    /// A run above every point.
+    const SENTINEL_ABOVE: Mode = Mode {
+        lo: f64::INFINITY,
+        hi: f64::INFINITY,
+        count: 0,
+        d: 0.0,
+        top: f64::INFINITY,
+    };
+
+    pub(super) fn new(lo: f64, hi: f64, count: u64) -> Mode {
+        let mut m = Mode {
+            lo,
+            hi,
+            count,
+            d: f64::NAN,
+            top: lo,
+        };
+        m.refresh();
+        m
+    }
+
+    fn refresh(&mut self) {
+        let seg = Seg::new(self.lo, self.hi, self.count);
+        self.d = seg.d;
+        self.top = seg.top;
+    }
+
+    /// One more sample inside the mode.
+    #[inline(always)]
+    fn bump(&mut self) {
+        self.count += 1;
+        self.d = f64::NAN;
+    }
+
+    pub(super) fn is_extended(&self) -> bool {
+        self.count >= 2
+    }
+
+    pub(super) fn public(&self) -> PajotMode {
+        PajotMode {
+            lo: self.lo,
+            hi: self.hi,
+            count: self.count,
+        }
+    }
+
+    /// The run of the overlap search (spacing and next-to-last point as cached).
+    #[inline(always)]
+    fn seg(&self) -> Seg {
+        Seg {
+            lo: self.lo,
+            hi: self.hi,
+            c: self.count,
+            d: self.d,
+            w: 0,
+            r: 0.0,
+            top: self.top,
+        }
+    }
+}
+
 /// ADR's state: the ordered, disjoint modes and the bound `m` (the top of the last extended
 /// mode).
 #[derive(Debug, Clone)]
 pub(super) struct Adr {
-    pub(super) modes: Vec<PajotMode>,
+    pub(super) modes: Vec<Mode>,
     /// The acceptance bound (log units), `-inf` until an extended mode exists.
     pub(super) m: f64,
     /// Index of the mode the last sample fell in (a guess: checked before use).
@@ -134,9 +218,27 @@ impl Adr {
         hint: 0,
     };
 
+    /// ADR holding `modes` (ascending, disjoint) and the bound `m`.
+    #[cfg(test)]
+    pub(super) fn with_modes(modes: &[PajotMode], m: f64) -> Adr {
+        Adr {
+            modes: modes
+                .iter()
+                .map(|p| Mode::new(p.lo, p.hi, p.count))
+                .collect(),
+            m,
+            hint: 0,
+        }
+    }
+
+    /// The modes, ascending.
+    pub(super) fn public_modes(&self) -> Vec<PajotMode> {
+        self.modes.iter().map(Mode::public).collect()
+    }
+
     /// Heap bytes held by the modes.
     pub(super) fn heap_bytes(&self) -> usize {
-        self.modes.capacity() * size_of::<PajotMode>()
+        self.modes.capacity() * size_of::<Mode>()
     }
 
     /// Numbers of single and extended modes.
@@ -155,7 +257,7 @@ impl Adr {
         for_each_run(
             logs,
             |i| logs[i] == logs[i + 1] || (logs[i + 1] - logs[i]).abs() < h[i] + h[i + 1],
-            |lo, hi, count| modes.push(PajotMode { lo, hi, count }),
+            |lo, hi, count| modes.push(Mode::new(lo, hi, count)),
         );
         let top = self
             .modes
@@ -179,32 +281,37 @@ impl Adr {
     fn update_with(
         &mut self,
         l: f64,
-        overlapped: impl Fn(&Adr, f64, usize) -> Option<(usize, usize)>,
+        overlapped: impl Fn(&mut Adr, f64, usize) -> Option<(usize, usize)>,
     ) -> bool {
-        // Most samples fall in the mode the previous one fell in: try it before searching.
-        if let Some(md) = self.modes.get_mut(self.hint) {
-            if md.is_extended() && md.lo <= l && l <= md.hi {
-                md.count += 1;
-                return false;
+        // Most samples fall in the mode the previous one fell in, or in its neighbour on their
+        // side: try those before searching.
+        let h = self.hint;
+        if let Some(md) = self.modes.get(h) {
+            let j = if l < md.lo {
+                h.wrapping_sub(1)
+            } else if l > md.hi {
+                h + 1
+            } else {
+                h
+            };
+            if let Some(md) = self.modes.get_mut(j) {
+                if md.is_extended() && md.lo <= l && l <= md.hi {
+                    md.bump();
+                    self.hint = j;
+                    return false;
+                }
             }
         }
         let i = self.modes.partition_point(|md| md.hi < l);
         if let Some(md) = self.modes.get_mut(i) {
             if md.is_extended() && md.lo <= l {
-                md.count += 1;
+                md.bump();
                 self.hint = i;
                 return false;
             }
         }
         let Some((a, b)) = overlapped(self, l, i) else {
-            self.modes.insert(
-                i,
-                PajotMode {
-                    lo: l,
-                    hi: l,
-                    count: 1,
-                },
-            );
+            self.modes.insert(i, Mode::new(l, l, 1));
             return false;
         };
         // Span l and the overlapped modes, then absorb every mode meeting the span.
@@ -220,7 +327,7 @@ impl Adr {
             hi = hi.max(self.modes[b].hi);
         }
         let count = self.modes[a..=b].iter().map(|m| m.count).sum::<u64>() + 1;
-        self.modes.splice(a..=b, [PajotMode { lo, hi, count }]);
+        self.modes.splice(a..=b, [Mode::new(lo, hi, count)]);
         let old = self.m;
         self.m = self.m.max(hi);
         self.m != old
@@ -231,61 +338,53 @@ impl Adr {
     /// the first mode whose top is `>= l` (`l` goes between modes `i - 1` and `i`).
     ///
     /// The point set is never materialised (module doc, decision 17): see [`Query`].
-    pub(super) fn overlapped(&self, l: f64, i: usize) -> Option<(usize, usize)> {
-        let q = Query {
-            modes: &self.modes,
-            l,
-            i,
-        };
-        let Some((nn, g)) = q.pilot() else {
-            // Every bandwidth is 0: only a point equal to l overlaps it, and the only point
-            // that can equal l is a single mode just after it.
-            return self.modes.get(i).filter(|m| m.lo == l).map(|_| (i, i));
-        };
-        let h = |s: usize, seg: &Seg, k: u64| nn * (g / q.p_at(s, seg, k, nn)).sqrt();
-        let h_l = h(i, &q.seg(i, nn), 0);
-        // Every p >= 1 (its own term), so no h exceeds nn sqrt(g).
-        let reach = h_l + nn * g.sqrt();
-        let hits = |x: f64, s: usize, seg: &Seg, k: u64| x == l || (l - x).abs() < h_l + h(s, seg, k);
-
-        let mut first = None;
-        'left: for s in (0..i).rev() {
-            let seg = q.seg(s, nn);
-            for k in seg.nearest_first(true) {
-                let x = seg.at(k);
-                if x != l && !(l - x < reach) {
-                    break 'left;
-                }
-                if hits(x, s, &seg, k) {
-                    first = Some(s);
-                }
+    pub(super) fn overlapped(&mut self, l: f64, i: usize) -> Option<(usize, usize)> {
+        for m in &mut self.modes {
+            if m.d.is_nan() {
+                m.refresh();
             }
         }
-        let mut last = None;
-        'right: for s in i + 1..q.runs() {
-            let seg = q.seg(s, nn);
-            for k in seg.nearest_first(false) {
-                let x = seg.at(k);
-                if x != l && !(x - l < reach) {
-                    break 'right;
-                }
-                if hits(x, s, &seg, k) {
-                    last = Some(s - 1);
-                }
-            }
-        }
-        match (first, last) {
-            (None, None) => None,
-            (Some(a), None) => Some((a, i - 1)),
-            (None, Some(b)) => Some((i, b)),
-            (Some(a), Some(b)) => Some((a, b)),
-        }
+        query(&self.modes, l, i, |q| q.overlapped())
     }
+}
+
+/// Runs `f` on the query of `l` (index `i`) among the fresh `modes`.
+fn query<T>(modes: &[Mode], l: f64, i: usize, f: impl FnOnce(&Query) -> T) -> T {
+    SCRATCH.with_borrow_mut(|runs| {
+        runs.clear();
+        runs.push(Mode::SENTINEL_BELOW);
+        runs.extend_from_slice(&modes[..i]);
+        runs.push(Mode {
+            lo: l,
+            hi: l,
+            count: 1,
+            d: 0.0,
+            top: l,
+        });
+        runs.extend_from_slice(&modes[i..]);
+        runs.push(Mode::SENTINEL_ABOVE);
+        let mut total: u64 = 0;
+        for m in modes {
+            total = total.saturating_add(m.count);
+        }
+        let points = if total < 1 << 52 {
+            // Every partial sum of the f64 counts is an exact integer: the same value.
+            total as f64 + 1.0
+        } else {
+            modes.iter().map(|m| m.count as f64).sum::<f64>() + 1.0
+        };
+        f(&Query { runs, l, i, points })
+    })
+}
+
+thread_local! {
+    /// The runs of the current query: transient, not part of any pixel's state.
+    static SCRATCH: std::cell::RefCell<Vec<Mode>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// One run of ADR's point set: a mode's evenly spaced points, or the newcomer alone.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Seg {
+struct Seg {
     lo: f64,
     hi: f64,
     c: u64,
@@ -293,35 +392,98 @@ pub(super) struct Seg {
     d: f64,
     /// How many same-run neighbours on each side lie closer than `nn` (`j d < nn`).
     w: u64,
+    /// The spacing in units of `nn`, `d / nn` (set with `w`).
+    r: f64,
+    /// The next-to-last point, [`Seg::at`]`(c - 2)` (`lo` for a single). Every point but `hi`
+    /// lies in `[lo, top]` (the formula is monotone in `k`), and `top` may exceed `hi` by
+    /// rounding.
+    top: f64,
 }
 
 impl Seg {
     fn new(lo: f64, hi: f64, c: u64) -> Seg {
         let d = if c >= 2 {
-            (hi - lo) / (c - 1) as f64
+            (hi - lo) / to_f64(c - 1)
         } else {
             0.0
         };
-        Seg { lo, hi, c, d, w: 0 }
+        let mut seg = Seg {
+            lo,
+            hi,
+            c,
+            d,
+            w: 0,
+            r: 0.0,
+            top: lo,
+        };
+        if c >= 2 {
+            seg.top = seg.formula(c - 2);
+        }
+        seg
+    }
+
+    /// The newcomer `l`.
+    fn single(l: f64) -> Seg {
+        Seg {
+            lo: l,
+            hi: l,
+            c: 1,
+            d: 0.0,
+            w: 0,
+            r: 0.0,
+            top: l,
+        }
     }
 
     /// This run with its `w` for the mean nearest-neighbour distance `nn`.
-    pub(super) fn with_w(mut self, nn: f64) -> Seg {
+    fn with_w(mut self, nn: f64) -> Seg {
+        self.r = self.d / nn;
         self.w = if self.c < 2 {
             0
-        } else if self.is_point() || nn / self.d > (self.c - 1) as f64 {
+        } else if self.is_point() || nn / self.d > to_f64(self.c - 1) {
             self.c - 1
         } else {
             // The largest integer j with j d < nn.
-            ((nn / self.d).ceil() - 1.0).max(0.0) as u64
+            (ceil(nn / self.d) - 1.0).max(0.0) as u64
         };
         self
+    }
+
+    /// Point `k` (docs/estimators.md §6.3's formula; the last one is `hi`).
+    #[inline]
+    fn at(&self, k: u64) -> f64 {
+        if k + 1 >= self.c {
+            self.hi
+        } else if k == 0 {
+            // The formula's term is +0.
+            self.lo + 0.0
+        } else if k + 2 == self.c {
+            self.top
+        } else {
+            self.formula(k)
+        }
+    }
+
+    /// `lo + ((hi - lo) k) / (c - 1)` (`c >= 2`).
+    fn formula(&self, k: u64) -> f64 {
+        self.lo + ((self.hi - self.lo) * to_f64(k)) / to_f64(self.c - 1)
+    }
+
+    /// Whether every point coincides (a single, or `lo == hi`).
+    fn is_point(&self) -> bool {
+        !(self.d > 0.0)
+    }
+
+    /// Whether the points strictly between the first `w + 1` and the last `w + 1` exist; they
+    /// all see exactly `w` same-run neighbours on each side and nothing else.
+    fn has_interior(&self) -> bool {
+        !self.is_point() && self.c > 2 * self.w + 2
     }
 
     /// The points of the run to test for overlap, nearest to the newcomer first (`from_top`:
     /// the run lies below it). The interior points all share one bandwidth, so only the
     /// nearest of them is listed: if it misses, the farther ones miss too.
-    pub(super) fn nearest_first(&self, from_top: bool) -> Nearest {
+    fn nearest_first(&self, from_top: bool) -> Nearest {
         let (c, w) = (self.c, self.w);
         // Ascending: the bottom points, the one interior point listed, the top points.
         let (bottom, mid, top) = if self.is_point() {
@@ -342,32 +504,11 @@ impl Seg {
             at: 0,
         }
     }
-
-    /// Point `k` (docs/estimators.md §6.3's formula; the last one is `hi`).
-    #[inline]
-    fn at(&self, k: u64) -> f64 {
-        if k + 1 >= self.c {
-            self.hi
-        } else {
-            self.lo + ((self.hi - self.lo) * k as f64) / (self.c - 1) as f64
-        }
-    }
-
-    /// Whether every point coincides (a single, or `lo == hi`).
-    fn is_point(&self) -> bool {
-        !(self.d > 0.0)
-    }
-
-    /// Whether the points strictly between the first `w + 1` and the last `w + 1` exist; they
-    /// all see exactly `w` same-run neighbours on each side and nothing else.
-    fn has_interior(&self) -> bool {
-        !self.is_point() && self.c > 2 * self.w + 2
-    }
 }
 
 /// Point indices of a run, nearest to the newcomer first ([`Seg::nearest_first`]): three
 /// ranges in turn, each walked downwards when the run lies below the newcomer.
-pub(super) struct Nearest {
+struct Nearest {
     ranges: [std::ops::Range<u64>; 3],
     from_top: bool,
     at: usize,
@@ -394,13 +535,41 @@ impl Iterator for Nearest {
 
 /// `Σ_{j=1..w} (1 - (j r)^2)`: the Epanechnikov pilot terms of `w` evenly spaced neighbours at
 /// spacing `r` (in units of `nn`).
-pub(super) fn kernel_sum(w: u64, r: f64) -> f64 {
-    let w = w as f64;
+fn kernel_sum(w: u64, r: f64) -> f64 {
+    let w = to_f64(w);
     w - r * r * w * (w + 1.0) * (2.0 * w + 1.0) / 6.0
 }
 
-/// ADR's point set for one newcomer: the modes with `l` inserted as a single run at index `i`,
-/// read in place (run `t` is mode `t` below `i` and mode `t - 1` above it).
+/// `a.min(b)` for operands that are never NaN nor `-0` (distances between logs), in one
+/// instruction rather than `f64::min`'s several.
+#[inline(always)]
+fn min(a: f64, b: f64) -> f64 {
+    if b < a { b } else { a }
+}
+
+/// `c as f64` (the signed conversion is one instruction on x86-64, the unsigned one several).
+#[inline(always)]
+fn to_f64(c: u64) -> f64 {
+    match i64::try_from(c) {
+        Ok(c) => c as f64,
+        Err(_) => c as f64,
+    }
+}
+
+/// `x.ceil()` without a library call (baseline x86-64 has no rounding instruction).
+#[inline(always)]
+fn ceil(x: f64) -> f64 {
+    if x.abs() < (1u64 << 52) as f64 {
+        // |x| < 2^52: the truncation is exact, and the ceiling is it or the next integer.
+        let t = x as i64 as f64;
+        if t < x { t + 1.0 } else { t }
+    } else {
+        x.ceil()
+    }
+}
+
+/// ADR's point set for one newcomer: the modes' runs with `l` inserted as a single run at
+/// index `i` (run `t` is mode `t` below `i` and mode `t - 1` above it), read in place.
 ///
 /// An extended mode stands for `c` evenly spaced points; all but the `w + 1` at each end see
 /// exactly `w` neighbours on each side within `nn` and none outside the mode, so they share one
@@ -409,173 +578,227 @@ pub(super) fn kernel_sum(w: u64, r: f64) -> f64 {
 /// neighbours are taken at the exact spacing `d`, which differs from the rounded point values
 /// by a rounding error; a neighbour at the window's edge contributes ~0 either way.
 ///
-/// Cost per newcomer: `O(modes + Σ min(c, w))` floating-point operations and one `ln` per
-/// extended mode, without allocating. An end point whose run lies at least `nn` from both
-/// neighbouring runs has no term from them, so its pilot value is the in-mode part alone; the
-/// checks that prove this use the run's extreme points, so the values are those of a walk
-/// over the neighbours (the unit tests compare with such a walk bit for bit).
-#[derive(Clone, Copy)]
+/// Cost per newcomer: `O(modes)` floating-point operations without allocating or dividing,
+/// and `O(w)` more with one `ln` per mode whose points have neighbours within `nn`. A run
+/// lying at least `nn` from both neighbouring runs gets no term from them, so a point's pilot
+/// value is its in-run part alone, and 1 when the run's spacing is at least `nn` (`w = 0`):
+/// such points change neither the product nor the sum of logs, and are skipped. The checks use
+/// the run's extreme points, so the values are those of a walk over the neighbours (the unit
+/// tests compare with the first implementation, which walked, bit for bit).
 struct Query<'a> {
-    modes: &'a [PajotMode],
+    /// The runs in order, between two sentinels: run `t` is `runs[t + 1]`, the newcomer is
+    /// run `i`, and modes keep their index below it and shift by one above.
+    runs: &'a [Mode],
     l: f64,
     i: usize,
+    /// Number of points.
+    points: f64,
 }
 
 impl Query<'_> {
-    /// Number of runs (modes plus the newcomer).
-    fn runs(&self) -> usize {
-        self.modes.len() + 1
-    }
+    /// [`Adr::overlapped`].
+    fn overlapped(&self) -> Option<(usize, usize)> {
+        let (l, i) = (self.l, self.i);
+        let Some((nn, g)) = self.pilot() else {
+            // Every bandwidth is 0: only a point equal to l overlaps it, and the only point
+            // that can equal l is a single mode just after it.
+            return (self.runs[i + 2].lo == l).then_some((i, i));
+        };
+        let h = |s: usize, seg: &Seg, k: u64| nn * (g / self.p_at(s, seg, k, nn)).sqrt();
+        let h_l = h(i, &Seg::single(l), 0);
+        // Every p >= 1 (its own term), so no h exceeds nn sqrt(g).
+        let reach = h_l + nn * g.sqrt();
+        let hits =
+            |x: f64, s: usize, seg: &Seg, k: u64| x == l || (l - x).abs() < h_l + h(s, seg, k);
 
-    /// `(lo, hi, count)` of run `t`.
-    #[inline(always)]
-    fn run(&self, t: usize) -> (f64, f64, u64) {
-        use std::cmp::Ordering::*;
-        match t.cmp(&self.i) {
-            Less => {
-                let m = &self.modes[t];
-                (m.lo, m.hi, m.count)
-            }
-            Equal => (self.l, self.l, 1),
-            Greater => {
-                let m = &self.modes[t - 1];
-                (m.lo, m.hi, m.count)
+        let mut first = None;
+        'left: for s in (0..i).rev() {
+            let seg = self.runs[s + 1].seg().with_w(nn);
+            for k in seg.nearest_first(true) {
+                let x = seg.at(k);
+                if x != l && !(l - x < reach) {
+                    break 'left;
+                }
+                if hits(x, s, &seg, k) {
+                    first = Some(s);
+                }
             }
         }
-    }
-
-    /// Run `t` with its `w` for the mean nearest-neighbour distance `nn`.
-    #[inline]
-    fn seg(&self, t: usize, nn: f64) -> Seg {
-        let (lo, hi, c) = self.run(t);
-        Seg::new(lo, hi, c).with_w(nn)
-    }
-
-    /// Number of points, as the sum of the counts in `f64` plus one.
-    fn points(&self) -> f64 {
-        let mut total: u64 = 0;
-        for m in self.modes {
-            total = total.saturating_add(m.count);
+        let mut last = None;
+        'right: for s in i + 1..self.runs.len() - 2 {
+            let seg = self.runs[s + 1].seg().with_w(nn);
+            for k in seg.nearest_first(false) {
+                let x = seg.at(k);
+                if x != l && !(x - l < reach) {
+                    break 'right;
+                }
+                if hits(x, s, &seg, k) {
+                    last = Some(s - 1);
+                }
+            }
         }
-        if total < 1 << 52 {
-            // Every partial sum of the f64 counts is an exact integer: the same value.
-            total as f64 + 1.0
-        } else {
-            self.modes.iter().map(|m| m.count as f64).sum::<f64>() + 1.0
+        match (first, last) {
+            (None, None) => None,
+            (Some(a), None) => Some((a, i - 1)),
+            (None, Some(b)) => Some((i, b)),
+            (Some(a), Some(b)) => Some((a, b)),
         }
     }
 
     /// `nn` and `g` of eq. 4, or `None` when every bandwidth is 0.
     fn pilot(&self) -> Option<(f64, f64)> {
-        let k = self.points();
+        let k = self.points;
         if k < 2.0 {
             return None;
         }
         // Mean distance to the nearest other point, summed run by run in order.
-        let n = self.runs();
         let mut nn_sum = 0.0;
-        let mut prev = f64::INFINITY;
-        let mut cur = self.run(0);
-        for t in 0..n {
-            let next_run = (t + 1 < n).then(|| self.run(t + 1));
-            let (lo, hi, c) = cur;
-            let next = next_run.map_or(f64::INFINITY, |r| r.0 - hi);
-            if c == 1 {
-                nn_sum += prev.min(next);
+        for w in self.runs.windows(3) {
+            let (below, r, above) = (&w[0], &w[1], &w[2]);
+            let (prev, next) = (r.lo - below.hi, above.lo - r.hi);
+            if r.count == 1 {
+                nn_sum += min(prev, next);
             } else {
-                let seg = Seg::new(lo, hi, c);
-                nn_sum += prev.min(seg.at(1) - lo);
-                nn_sum += next.min(hi - seg.at(c - 2));
-                nn_sum += (c - 2) as f64 * seg.d;
-            }
-            prev = next;
-            if let Some(r) = next_run {
-                cur = r;
+                nn_sum += min(prev, r.seg().at(1) - r.lo);
+                nn_sum += min(next, r.hi - r.top);
+                nn_sum += to_f64(r.count - 2) * r.d;
             }
         }
         let nn = nn_sum / k;
         if !(nn > 0.0 && nn.is_finite()) {
             return None;
         }
-        // ln g = mean of ln p, as logs of partial products (every p >= 1).
+        // ln g = mean of ln p, as logs of partial products (every p >= 1). A factor 1 changes
+        // nothing, nor does adding ln 1 = 0 (ln_sum is never -0), so such points are skipped.
         let mut ln_sum = 0.0;
         let mut product = 1.0;
         let mut take = |p: f64, ln_sum: &mut f64| {
-            product *= p;
-            if product > 1e200 {
-                *ln_sum += product.ln();
-                product = 1.0;
+            if p != 1.0 {
+                product *= p;
+                if product > 1e200 {
+                    *ln_sum += product.ln();
+                    product = 1.0;
+                }
             }
         };
-        let mut prev_hi = f64::NAN;
-        for s in 0..n {
-            let seg = self.seg(s, nn);
-            let next_lo = if s + 1 < n {
-                self.run(s + 1).0
-            } else {
-                f64::NAN
-            };
-            if seg.c == 1 {
-                // p = 1 unless a neighbour lies within nn (x = lo = hi); a factor 1 changes
-                // nothing.
-                if s > 0 && seg.lo - prev_hi < nn || s + 1 < n && next_lo - seg.lo < nn {
-                    take(self.p_at(s, &seg, 0, nn), &mut ln_sum);
-                }
-            } else if seg.is_point() {
-                ln_sum += seg.c as f64 * self.p_at(s, &seg, 0, nn).ln();
-            } else {
-                let alone = (s == 0 || !(seg.lo - prev_hi < nn))
-                    && (s + 1 == n
-                        || !(next_lo - seg.hi < nn) && !(next_lo - seg.at(seg.c - 2) < nn));
-                let (c, w) = (seg.c, seg.w);
-                let r = seg.d / nn;
-                let p = |k: u64| {
-                    if alone {
-                        1.0 + (kernel_sum(k.min(w), r) + kernel_sum((c - 1 - k).min(w), r))
-                    } else {
-                        self.p_at(s, &seg, k, nn)
-                    }
-                };
-                if seg.has_interior() {
-                    for k in (0..=w).chain(c - 1 - w..c) {
-                        take(p(k), &mut ln_sum);
-                    }
-                    let interior = (c - 2 * w - 2) as f64;
-                    ln_sum += interior * (1.0 + 2.0 * kernel_sum(w, r)).ln();
-                } else {
-                    for k in 0..c {
-                        take(p(k), &mut ln_sum);
-                    }
-                }
+        for (s, w) in self.runs.windows(3).enumerate() {
+            let (below, r, above) = (&w[0], &w[1], &w[2]);
+            // The least distance from the run's points, which lie in [lo, top] and at hi, to
+            // another run's: no other run within nn when nn <= far.
+            let far = min(min(r.lo - below.hi, above.lo - r.hi), above.lo - r.top);
+            // Every p is then 1 for a single, and for an extended run with w = 0, which holds
+            // exactly when nn / d rounds to at most 1, that is when nn <= d (d > 0): the
+            // in-run part is 1 + (K(0) + K(0)) = 1, unless r^2 overflows (K(0) is then NaN,
+            // as in the literal form).
+            if nn <= far && (r.count == 1 || r.d > 0.0 && nn <= r.d && r.d <= nn * 1e150) {
+                continue;
             }
-            prev_hi = seg.hi;
+            let seg = r.seg().with_w(nn);
+            let (c, w) = (seg.c, seg.w);
+            if nn <= far && seg.has_interior() && w < 8 {
+                // The common case, alone with a few neighbours on each side: the bottom points
+                // k = 0..=w have p = 1 + (K(k) + K(w)), the top ones mirror them, and the
+                // interior points share 1 + 2 K(w).
+                let mut p = [0.0; 8];
+                let kw = kernel_sum(w, seg.r);
+                for (j, pj) in p[..=w as usize].iter_mut().enumerate() {
+                    *pj = 1.0 + (kernel_sum(j as u64, seg.r) + kw);
+                }
+                for &pj in &p[..=w as usize] {
+                    take(pj, &mut ln_sum);
+                }
+                for &pj in p[..=w as usize].iter().rev() {
+                    take(pj, &mut ln_sum);
+                }
+                let p_int = 1.0 + 2.0 * kw;
+                if p_int != 1.0 {
+                    ln_sum += to_f64(c - 2 * w - 2) * p_int.ln();
+                }
+                continue;
+            }
+            self.add_logs(s, seg, nn <= far, nn, &mut take, &mut ln_sum);
         }
         ln_sum += product.ln();
         Some((nn, (ln_sum / k).exp()))
     }
 
+    /// The terms of run `s` (`seg`, with its `w`) in the pilot's `ln g`, in order: `take` for
+    /// the points evaluated one by one, then the interior's share. `alone`: no other run lies
+    /// within `nn` of its points.
+    #[inline(never)]
+    fn add_logs(
+        &self,
+        s: usize,
+        seg: Seg,
+        alone: bool,
+        nn: f64,
+        take: &mut impl FnMut(f64, &mut f64),
+        ln_sum: &mut f64,
+    ) {
+        let (c, w) = (seg.c, seg.w);
+        if c == 1 {
+            take(self.p_at(s, &seg, 0, nn), ln_sum);
+            return;
+        }
+        if seg.is_point() {
+            *ln_sum += to_f64(c) * self.p_at(s, &seg, 0, nn).ln();
+            return;
+        }
+        let r = seg.r;
+        if seg.has_interior() {
+            let kw = kernel_sum(w, r);
+            if alone {
+                // Bottom points k = 0..=w: 1 + (K(k) + K(w)); the top ones mirror them.
+                for j in 0..=w {
+                    take(1.0 + (kernel_sum(j, r) + kw), ln_sum);
+                }
+                for j in (0..=w).rev() {
+                    take(1.0 + (kw + kernel_sum(j, r)), ln_sum);
+                }
+            } else {
+                for k in (0..=w).chain(c - 1 - w..c) {
+                    take(self.p_at(s, &seg, k, nn), ln_sum);
+                }
+            }
+            let p_int = 1.0 + 2.0 * kw;
+            if p_int != 1.0 {
+                *ln_sum += to_f64(c - 2 * w - 2) * p_int.ln();
+            }
+        } else {
+            for k in 0..c {
+                let p = if alone {
+                    1.0 + (kernel_sum(k.min(w), r) + kernel_sum((c - 1 - k).min(w), r))
+                } else {
+                    self.p_at(s, &seg, k, nn)
+                };
+                take(p, ln_sum);
+            }
+        }
+    }
+
     /// The pilot `p` at point `k` of run `s` (`seg`, with its `w`): itself, its own run's
-    /// neighbours within `nn`, and other runs' points within `nn`.
+    /// neighbours within `nn`, and other runs' points within `nn` (the sentinels end the
+    /// walks).
     fn p_at(&self, s: usize, seg: &Seg, k: u64, nn: f64) -> f64 {
         let x = seg.at(k);
         let mut p = 1.0;
         if seg.c >= 2 {
             if seg.is_point() {
-                p += (seg.c - 1) as f64;
+                p += to_f64(seg.c - 1);
             } else {
-                let r = seg.d / nn;
+                let r = seg.r;
                 p += kernel_sum(k.min(seg.w), r) + kernel_sum((seg.c - 1 - k).min(seg.w), r);
             }
         }
-        for t in (0..s).rev() {
-            let (sum, done) = self.from_run(t, x, nn, true);
+        for run in self.runs[..s + 1].iter().rev() {
+            let (sum, done) = from_run(&run.seg(), x, nn, true);
             p += sum;
             if done {
                 break;
             }
         }
-        for t in s + 1..self.runs() {
-            let (sum, done) = self.from_run(t, x, nn, false);
+        for run in &self.runs[s + 2..] {
+            let (sum, done) = from_run(&run.seg(), x, nn, false);
             p += sum;
             if done {
                 break;
@@ -583,39 +806,42 @@ impl Query<'_> {
         }
         p
     }
+}
 
-    /// Pilot terms at `x` from the points of run `t` lying below (`below`) or above it;
-    /// `done` when runs further away cannot contribute.
-    fn from_run(&self, t: usize, x: f64, nn: f64, below: bool) -> (f64, bool) {
-        let (lo, hi, c) = self.run(t);
-        // Distances from x to the run's near and far ends.
-        let (near, far) = if below { (x - hi, x - lo) } else { (lo - x, hi - x) };
-        if !(near < nn) {
-            return (0.0, true);
-        }
-        let seg = Seg::new(lo, hi, c);
-        if far < nn {
-            // The whole run is inside the window: Σ_j (1 - ((near + j d) / nn)^2) in closed
-            // form, j = 0..c-1.
-            let c = seg.c as f64;
-            let (sj, sj2) = (c * (c - 1.0) / 2.0, (c - 1.0) * c * (2.0 * c - 1.0) / 6.0);
-            let sq = c * near * near + 2.0 * near * seg.d * sj + seg.d * seg.d * sj2;
-            return (c - sq / (nn * nn), false);
-        }
-        // Part of the run: walk from the near end until the window's edge.
-        let mut sum = 0.0;
-        for j in 0..seg.c {
-            let y = if below {
-                seg.at(seg.c - 1 - j)
-            } else {
-                seg.at(j)
-            };
-            let r = (x - y) / nn;
-            if !(r.abs() < 1.0) {
-                break;
-            }
-            sum += 1.0 - r * r;
-        }
-        (sum, true)
+/// Pilot terms at `x` from the points of another run lying below (`below`) or above it;
+/// `done` when runs further away cannot contribute.
+#[inline]
+fn from_run(seg: &Seg, x: f64, nn: f64, below: bool) -> (f64, bool) {
+    // Distances from x to the run's near and far ends.
+    let (near, far) = if below {
+        (x - seg.hi, x - seg.lo)
+    } else {
+        (seg.lo - x, seg.hi - x)
+    };
+    if !(near < nn) {
+        return (0.0, true);
     }
+    if far < nn {
+        // The whole run is inside the window: Σ_j (1 - ((near + j d) / nn)^2) in closed
+        // form, j = 0..c-1.
+        let c = seg.c as f64;
+        let (sj, sj2) = (c * (c - 1.0) / 2.0, (c - 1.0) * c * (2.0 * c - 1.0) / 6.0);
+        let sq = c * near * near + 2.0 * near * seg.d * sj + seg.d * seg.d * sj2;
+        return (c - sq / (nn * nn), false);
+    }
+    // Part of the run: walk from the near end until the window's edge.
+    let mut sum = 0.0;
+    for j in 0..seg.c {
+        let y = if below {
+            seg.at(seg.c - 1 - j)
+        } else {
+            seg.at(j)
+        };
+        let r = (x - y) / nn;
+        if !(r.abs() < 1.0) {
+            break;
+        }
+        sum += 1.0 - r * r;
+    }
+    (sum, true)
 }

@@ -156,16 +156,16 @@ fn store(buf: &mut Vec<f64>, learn: usize, s: f64) {
 }
 
 /// Ends a learning phase: feeds the stored samples' logs to `rot` in arrival order (if given),
-/// then returns the samples sorted, with their logs (sorted apart: `ln` is monotone).
+/// then returns the samples sorted, with their logs (`ln` is monotone, so the logs of the
+/// sorted samples are the sorted logs).
 fn sorted_with_logs(mut values: Vec<f64>, rot: Option<&mut Rot>) -> (Vec<f64>, Vec<f64>) {
-    let mut logs: Vec<f64> = values.iter().map(|s| s.ln()).collect();
     if let Some(rot) = rot {
-        for &l in &logs {
-            rot.observe(l);
+        for &s in &values {
+            rot.observe(s.ln());
         }
     }
     values.sort_by(f64::total_cmp);
-    logs.sort_by(f64::total_cmp);
+    let logs = values.iter().map(|s| s.ln()).collect();
     (values, logs)
 }
 
@@ -426,7 +426,7 @@ impl PajotAdr {
 
     /// The modes, ascending.
     pub fn modes(&self) -> Vec<PajotMode> {
-        self.settled().adr.modes.clone()
+        self.settled().adr.public_modes()
     }
 
     fn is_learning(&self) -> bool {
@@ -638,7 +638,7 @@ impl PajotHybrid {
         self.settled()
             .adr
             .as_ref()
-            .map_or_else(Vec::new, |a| a.modes.clone())
+            .map_or_else(Vec::new, Adr::public_modes)
     }
 
     /// The 0-based index of the sample at which the pixel switched to ROT alone, if it did.

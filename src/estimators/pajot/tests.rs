@@ -256,10 +256,7 @@ fn adr_implicit_point_set_matches_materialised() {
         if modes.get(i).is_some_and(|m| m.is_extended() && m.lo <= l) {
             continue;
         }
-        let adr = Adr {
-            modes: modes.clone(),
-            ..Adr::NEW
-        };
+        let mut adr = Adr::with_modes(&modes, f64::NEG_INFINITY);
         // Skip near ties of the literal computation.
         let mut xs: Vec<f64> = modes
             .iter()
@@ -302,11 +299,7 @@ fn adr_merge_absorbs_a_mode_it_does_not_overlap() {
         hi: 7.61,
         count: 2,
     };
-    let mut adr = Adr {
-        modes: vec![dense, wide],
-        m: 7.61,
-        ..Adr::NEW
-    };
+    let mut adr = Adr::with_modes(&[dense, wide], 7.61);
     let l = 0.32;
     assert_eq!(adr.overlapped_naive(l, 0), Some((0, 1)));
     // The newcomer overlaps only the wide mode's point 2.16:
@@ -322,7 +315,7 @@ fn adr_merge_absorbs_a_mode_it_does_not_overlap() {
     assert!(xs[41] - l < h[0] + h[41]);
     assert!(!adr.update(l), "m unchanged");
     assert_eq!(
-        adr.modes,
+        adr.public_modes(),
         vec![PajotMode {
             lo: l,
             hi: 7.61,
@@ -333,89 +326,37 @@ fn adr_merge_absorbs_a_mode_it_does_not_overlap() {
 
 #[test]
 fn adr_update_inside_an_extended_mode_only_counts() {
-    let mut adr = Adr {
-        modes: vec![PajotMode {
+    let mut adr = Adr::with_modes(
+        &[PajotMode {
             lo: 0.0,
             hi: 1.0,
             count: 3,
         }],
-        m: 1.0,
-        ..Adr::NEW
-    };
+        1.0,
+    );
     for l in [0.0, 0.5, 1.0] {
         assert!(!adr.update(l));
     }
     assert_eq!(adr.modes[0].count, 6);
     // Equal to a single: identical values overlap even with h = 0, forming an extended mode.
-    let mut adr = Adr {
-        modes: vec![PajotMode {
+    let mut adr = Adr::with_modes(
+        &[PajotMode {
             lo: 2.0,
             hi: 2.0,
             count: 1,
         }],
-        ..Adr::NEW
-    };
+        f64::NEG_INFINITY,
+    );
     assert!(adr.update(2.0));
     assert_eq!(adr.m, 2.0);
     assert_eq!(
-        adr.modes,
+        adr.public_modes(),
         vec![PajotMode {
             lo: 2.0,
             hi: 2.0,
             count: 2
         }]
     );
-}
-
-#[test]
-#[ignore]
-fn tmp_stats() {
-    use crate::dist::Preset;
-    use rand::SeedableRng;
-    use crate::Estimator;
-    for (preset, spp) in [(Preset::Firefly, 1024), (Preset::Firefly, 4096), (Preset::Caustic, 1024)] {
-        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(0xbe7c_4000 + spp as u64);
-        let mut out = vec![0.0; spp * 8];
-        preset.dist().fill(&mut rng, &mut out);
-        let ts = [1e-6, 1e-3, 1e-2, 0.05, 0.1, 0.3];
-        let mut unc = [0u64; 6];
-        let (mut calls, mut segs, mut gsum, mut ext) = (0u64, 0u64, 0.0, 0u64);
-        for px in out.chunks(spp) {
-            let mut e = super::PajotAdr::new(50).unwrap();
-            for (j, &s) in px.iter().enumerate() {
-                if j >= 50 && s != 0.0 {
-                    let l = s.ln();
-                    let modes = &e.adr.modes;
-                    let i = modes.partition_point(|md| md.hi < l);
-                    let inside = modes.get(i).is_some_and(|m| m.is_extended() && m.lo <= l);
-                    if !inside {
-                        calls += 1;
-                        segs += modes.len() as u64;
-                        ext += modes.iter().filter(|m| m.is_extended()).count() as u64;
-                        let mut xs: Vec<f64> = modes.iter().flat_map(|m| m.points().collect::<Vec<_>>()).collect();
-                        xs.push(l);
-                        xs.sort_by(f64::total_cmp);
-                        let h = adr_bandwidths(&xs);
-                        let me = xs.iter().position(|&x| x == l).unwrap();
-                        let hmax = h.iter().cloned().fold(0.0, f64::max);
-                        let mut best = f64::INFINITY;
-                        for jj in 0..xs.len() {
-                            if jj == me || xs[jj] == l { continue; }
-                            let d = (xs[jj]-l).abs();
-                            if d > 1.5 * (h[me] + hmax) { continue; }
-                            let r = d / (h[me] + h[jj]);
-                            best = best.min((r - 1.0).abs());
-                        }
-                        for (t, u) in ts.iter().zip(unc.iter_mut()) { if best < *t { *u += 1; } }
-                        // g estimate: h = nn sqrt(g/p) -> g = ...
-                        let _ = &mut gsum;
-                    }
-                }
-                e.push(s);
-            }
-        }
-        println!("{preset:?} {spp}: calls {calls} modes {:.1} ext {:.1} uncertain at {ts:?}: {:?}", segs as f64 / calls as f64, ext as f64 / calls as f64, unc.iter().map(|&u| u as f64 / calls as f64).collect::<Vec<_>>());
-    }
 }
 
 /// Heavy-tailed log-luminances with ties: a lognormal body, exact repeats, values one ulp apart,
@@ -457,12 +398,9 @@ fn adr_overlapped_equals_reference() {
         if modes.get(i).is_some_and(|m| m.is_extended() && m.lo <= l) {
             continue;
         }
-        let adr = Adr {
-            modes,
-            ..Adr::NEW
-        };
+        let mut adr = Adr::with_modes(&modes, f64::NEG_INFINITY);
         let want = adr.overlapped_ref(l, i);
-        assert_eq!(adr.overlapped(l, i), want, "l = {l}, modes = {:?}", adr.modes);
+        assert_eq!(adr.overlapped(l, i), want, "l = {l}, modes = {modes:?}");
         merged += usize::from(want.is_some());
     }
     assert!(merged > 8_000, "{merged} merged");
@@ -492,7 +430,11 @@ fn adr_updates_equal_reference_on_hard_streams() {
         for &l in rest {
             let before = fast.modes.len();
             assert_eq!(fast.update(l), slow.update_ref(l));
-            assert_eq!(fast.modes, slow.modes, "round {round}, l = {l}");
+            assert_eq!(
+                fast.public_modes(),
+                slow.public_modes(),
+                "round {round}, l = {l}"
+            );
             assert_eq!(fast.m.to_bits(), slow.m.to_bits());
             calls += u64::from(fast.modes.len() != before);
         }

@@ -1,26 +1,31 @@
 //! Slow forms of [`Adr::overlapped`], kept as oracles of the unit tests: the materialised
 //! point set (the literal reading) and the first implicit form, which allocated its runs.
 
-use super::{Adr, PajotMode, Pilot, Seg, kernel_sum, pilot};
+use super::{Adr, PajotMode, Pilot, pilot};
 
 impl Adr {
     /// [`Adr::update`] through [`Adr::overlapped_ref`].
     pub(in crate::estimators::pajot) fn update_ref(&mut self, l: f64) -> bool {
-        self.update_with(l, Adr::overlapped_ref)
+        self.update_with(l, |adr: &mut Adr, l, i| adr.overlapped_ref(l, i))
     }
 
     /// [`Adr::overlapped`] by materialising every point: the literal reading, kept as the
     /// oracle of the unit tests.
     #[cfg(test)]
-    pub(in crate::estimators::pajot) fn overlapped_naive(&self, l: f64, i: usize) -> Option<(usize, usize)> {
-        let total: u64 = self.modes.iter().map(|m| m.count).sum();
+    pub(in crate::estimators::pajot) fn overlapped_naive(
+        &self,
+        l: f64,
+        i: usize,
+    ) -> Option<(usize, usize)> {
+        let modes = self.public_modes();
+        let total: u64 = modes.iter().map(|m| m.count).sum();
         let mut xs = Vec::with_capacity(usize::try_from(total).unwrap_or(0).saturating_add(1));
-        for md in &self.modes[..i] {
+        for md in &modes[..i] {
             xs.extend(md.points());
         }
         let pos = xs.len();
         xs.push(l);
-        for md in &self.modes[i..] {
+        for md in &modes[i..] {
             xs.extend(md.points());
         }
         let mut p = Vec::new();
@@ -38,14 +43,14 @@ impl Adr {
         let mut first = None;
         if i > 0 {
             let mut mode = i - 1;
-            let mut start = pos - self.modes[mode].count as usize;
+            let mut start = pos - modes[mode].count as usize;
             for j in (0..pos).rev() {
                 if xs[j] != l && !(l - xs[j] < reach) {
                     break;
                 }
                 while j < start {
                     mode -= 1;
-                    start -= self.modes[mode].count as usize;
+                    start -= modes[mode].count as usize;
                 }
                 if hits(j) {
                     first = Some(mode);
@@ -53,16 +58,16 @@ impl Adr {
             }
         }
         let mut last = None;
-        if i < self.modes.len() {
+        if i < modes.len() {
             let mut mode = i;
-            let mut end = pos + 1 + self.modes[mode].count as usize;
+            let mut end = pos + 1 + modes[mode].count as usize;
             for (j, &x) in xs.iter().enumerate().skip(pos + 1) {
                 if x != l && !(x - l < reach) {
                     break;
                 }
                 while j >= end {
                     mode += 1;
-                    end += self.modes[mode].count as usize;
+                    end += modes[mode].count as usize;
                 }
                 if hits(j) {
                     last = Some(mode);
@@ -83,12 +88,17 @@ impl Adr {
     ///
     /// The implementation before the allocation-free [`Adr::overlapped`], kept verbatim as
     /// its bit-for-bit oracle.
-    pub(in crate::estimators::pajot) fn overlapped_ref(&self, l: f64, i: usize) -> Option<(usize, usize)> {
-        let mut set = PointSet::new(&self.modes, l, i);
+    pub(in crate::estimators::pajot) fn overlapped_ref(
+        &self,
+        l: f64,
+        i: usize,
+    ) -> Option<(usize, usize)> {
+        let modes = self.public_modes();
+        let mut set = PointSet::new(&modes, l, i);
         let Some((nn, g)) = set.pilot() else {
             // Every bandwidth is 0: only a point equal to l overlaps it, and the only point
             // that can equal l is a single mode just after it.
-            return self.modes.get(i).filter(|m| m.lo == l).map(|_| (i, i));
+            return modes.get(i).filter(|m| m.lo == l).map(|_| (i, i));
         };
         let h = |s: usize, k: u64| nn * (g / set.p_at(s, k, nn)).sqrt();
         let h_l = h(i, 0);
@@ -322,4 +332,52 @@ impl PointSet {
             ks
         }
     }
+}
+
+/// One run of the point set (the first implementation's, verbatim).
+#[derive(Debug, Clone, Copy)]
+struct Seg {
+    lo: f64,
+    hi: f64,
+    c: u64,
+    /// Spacing `(hi - lo) / (c - 1)` (0 for a single).
+    d: f64,
+    /// How many same-run neighbours on each side lie closer than `nn` (`j d < nn`).
+    w: u64,
+}
+
+impl Seg {
+    fn new(lo: f64, hi: f64, c: u64) -> Seg {
+        let d = if c >= 2 {
+            (hi - lo) / (c - 1) as f64
+        } else {
+            0.0
+        };
+        Seg { lo, hi, c, d, w: 0 }
+    }
+
+    /// Point `k`.
+    fn at(&self, k: u64) -> f64 {
+        if k + 1 >= self.c {
+            self.hi
+        } else {
+            self.lo + ((self.hi - self.lo) * k as f64) / (self.c - 1) as f64
+        }
+    }
+
+    /// Whether every point coincides (a single, or `lo == hi`).
+    fn is_point(&self) -> bool {
+        !(self.d > 0.0)
+    }
+
+    /// Whether the points strictly between the first `w + 1` and the last `w + 1` exist.
+    fn has_interior(&self) -> bool {
+        !self.is_point() && self.c > 2 * self.w + 2
+    }
+}
+
+/// `Σ_{j=1..w} (1 - (j r)^2)`.
+fn kernel_sum(w: u64, r: f64) -> f64 {
+    let w = w as f64;
+    w - r * r * w * (w + 1.0) * (2.0 * w + 1.0) / 6.0
 }
