@@ -608,9 +608,14 @@ impl Query<'_> {
         let h_l = h(i, &Seg::single(l), 0);
         // Every p >= 1 (its own term), so no h exceeds nn sqrt(g).
         let reach = h_l + nn * g.sqrt();
-        let hits =
-            |x: f64, s: usize, seg: &Seg, k: u64| x == l || (l - x).abs() < h_l + h(s, seg, k);
+        // A distance below h_l is below h_l + h_x whatever h_x >= 0 (rounding is monotone).
+        let hits = |x: f64, s: usize, seg: &Seg, k: u64| {
+            let dist = (l - x).abs();
+            x == l || dist < h_l || dist < h_l + h(s, seg, k)
+        };
 
+        // Only the farthest mode with a hit matters on each side: once a point of a mode hits,
+        // its other points need no test (those of the next mode are farther still).
         let mut first = None;
         'left: for s in (0..i).rev() {
             let seg = self.runs[s + 1].seg().with_w(nn);
@@ -621,6 +626,7 @@ impl Query<'_> {
                 }
                 if hits(x, s, &seg, k) {
                     first = Some(s);
+                    break;
                 }
             }
         }
@@ -634,6 +640,7 @@ impl Query<'_> {
                 }
                 if hits(x, s, &seg, k) {
                     last = Some(s - 1);
+                    break;
                 }
             }
         }
