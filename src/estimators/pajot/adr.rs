@@ -4,7 +4,7 @@
 use super::for_each_run;
 
 #[cfg(test)]
-mod reference;
+pub(super) mod reference;
 
 /// One mode of ADR's approximate distribution representation, in log-luminance units.
 ///
@@ -273,16 +273,11 @@ impl Adr {
     /// After learning, adds a non-black `l` to the representation (docs/estimators.md §6.3). Returns whether
     /// `m` changed.
     pub(super) fn update(&mut self, l: f64) -> bool {
-        self.update_with(l, Adr::overlapped)
-    }
+        #[cfg(test)]
+        if reference::reference() {
+            return self.update_ref(l);
+        }
 
-    /// [`Adr::update`] with the overlap search given (the unit tests pass the reference).
-    #[inline(always)]
-    fn update_with(
-        &mut self,
-        l: f64,
-        overlapped: impl Fn(&mut Adr, f64, usize) -> Option<(usize, usize)>,
-    ) -> bool {
         // Most samples fall in the mode the previous one fell in, or in its neighbour on their
         // side: try those before searching.
         let h = self.hint;
@@ -310,7 +305,7 @@ impl Adr {
                 return false;
             }
         }
-        let Some((a, b)) = overlapped(self, l, i) else {
+        let Some((a, b)) = self.overlapped(l, i) else {
             self.modes.insert(i, Mode::new(l, l, 1));
             return false;
         };

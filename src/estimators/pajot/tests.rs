@@ -1,10 +1,13 @@
 //! Unit tests of the Pajot internals: the runs, the kept list, ROT's overlap search and ADR's
 //! implicit point set, each against a literal computation.
 
+use super::adr::reference::with_reference;
 use super::adr::{Adr, PajotMode, adr_bandwidths};
-use super::for_each_run;
 use super::ledger::Ledger;
 use super::rot::Rot;
+use super::{PajotAdr, PajotHybrid, for_each_run, sorted_with_logs};
+use crate::Estimator;
+use proptest::prelude::*;
 
 /// splitmix64: a deterministic stream for the randomised checks (no RNG crate in this module).
 struct Mix(u64);
@@ -440,4 +443,82 @@ fn adr_updates_equal_reference_on_hard_streams() {
         }
     }
     assert!(calls > 4_000, "{calls} searches changed the modes");
+}
+
+/// Heavy-tailed samples with ties: a lognormal body, a Pareto tail, black samples, repeated
+/// values and their neighbours one ulp away, and the extremes 1e-300 and 1e300.
+fn hard_samples(max_len: usize) -> impl Strategy<Value = Vec<f64>> {
+    let tie = 2f64;
+    prop::collection::vec(
+        prop_oneof![
+            8 => (0.0f64..1.0, 0.0f64..1.0, 0.0f64..1.0)
+                .prop_map(|(a, b, c)| (2.0 * (a + b + c) - 3.0).exp()),
+            2 => (0.0f64..1.0).prop_map(|u| 1e3 * (1.0 - u).powf(-1.0 / 1.1)),
+            2 => Just(0.0),
+            2 => prop::sample::select(vec![0.5, tie, 7.25]),
+            1 => prop::sample::select(vec![
+                f64::from_bits(tie.to_bits() + 1),
+                f64::from_bits(tie.to_bits() - 1),
+            ]),
+            1 => prop::sample::select(vec![1e-300, 1e300, f64::MIN_POSITIVE, 1.0]),
+        ],
+        0..max_len,
+    )
+}
+
+/// Pushes `stream` into `fast` and, through the first implementation of ADR's update, into
+/// `slow` (built alike); after every sample the two agree bit for bit on everything they
+/// report.
+fn check_same(mut fast: Box<dyn Estimator>, mut slow: Box<dyn Estimator>, stream: &[f64]) {
+    let bits = |e: &dyn Estimator| e.estimate().ok().map(f64::to_bits);
+    for (j, &s) in stream.iter().enumerate() {
+        fast.push(s);
+        with_reference(|| slow.push(s));
+        assert_eq!(
+            bits(&*fast),
+            bits(&*slow),
+            "{fast} estimate at {j}: {stream:?}"
+        );
+        assert_eq!(
+            format!("{:?}", fast.extras()),
+            format!("{:?}", slow.extras()),
+            "{fast} extras at {j}: {stream:?}"
+        );
+        assert_eq!(fast.state_bytes(), slow.state_bytes(), "{fast} at {j}");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// ADR and the hybrid with the faster search report exactly what they did with the first
+    /// one, on heavy-tailed streams (ties, black samples, extremes), with and without a cap.
+    #[test]
+    fn estimators_equal_first_implementation(stream in hard_samples(700), learn in 0usize..60,
+                                             t in 1usize..4, cap in 0usize..6) {
+        let adr = || PajotAdr::new(learn).unwrap();
+        check_same(Box::new(adr()), Box::new(adr()), &stream);
+        check_same(
+            Box::new(adr().with_max_delayed(cap)),
+            Box::new(adr().with_max_delayed(cap)),
+            &stream,
+        );
+        let hybrid = || PajotHybrid::new(learn, t, 0.0).unwrap();
+        check_same(Box::new(hybrid()), Box::new(hybrid()), &stream);
+        let hybrid = || PajotHybrid::new(learn, t, 0.05).unwrap().with_max_delayed(cap);
+        check_same(Box::new(hybrid()), Box::new(hybrid()), &stream);
+    }
+
+    /// The learning phase's sorting: the logs of the sorted samples are the sorted logs.
+    #[test]
+    fn sorted_logs_equal_logs_sorted(stream in hard_samples(80)) {
+        let values: Vec<f64> = stream.into_iter().filter(|&s| s > 0.0).collect();
+        let mut logs: Vec<f64> = values.iter().map(|s| s.ln()).collect();
+        logs.sort_by(f64::total_cmp);
+        let (_, got) = sorted_with_logs(values, None);
+        prop_assert_eq!(
+            got.iter().map(|l| l.to_bits()).collect::<Vec<_>>(),
+            logs.iter().map(|l| l.to_bits()).collect::<Vec<_>>()
+        );
+    }
 }

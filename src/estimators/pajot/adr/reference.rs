@@ -1,12 +1,68 @@
-//! Slow forms of [`Adr::overlapped`], kept as oracles of the unit tests: the materialised
-//! point set (the literal reading) and the first implicit form, which allocated its runs.
+//! The first implementation of [`Adr::update`], kept as the bit-for-bit oracle of the faster
+//! one: its search (the last mode hit, else a binary search) and its overlap search (an
+//! implicit point set in an allocated list of runs), verbatim but for the storage of the modes;
+//! and the literal reading, which materialises every point.
 
-use super::{Adr, PajotMode, Pilot, pilot};
+use super::{Adr, Mode, PajotMode, Pilot, pilot};
+use std::cell::Cell;
+
+thread_local! {
+    static REFERENCE: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Runs `f` with every [`Adr::update`] of this thread going through [`Adr::update_ref`].
+pub(in crate::estimators::pajot) fn with_reference<T>(f: impl FnOnce() -> T) -> T {
+    REFERENCE.set(true);
+    let out = f();
+    REFERENCE.set(false);
+    out
+}
+
+/// Whether [`with_reference`] is in force.
+pub(super) fn reference() -> bool {
+    REFERENCE.get()
+}
 
 impl Adr {
-    /// [`Adr::update`] through [`Adr::overlapped_ref`].
+    /// [`Adr::update`] as first implemented.
     pub(in crate::estimators::pajot) fn update_ref(&mut self, l: f64) -> bool {
-        self.update_with(l, |adr: &mut Adr, l, i| adr.overlapped_ref(l, i))
+        if let Some(md) = self.modes.get_mut(self.hint) {
+            if md.is_extended() && md.lo <= l && l <= md.hi {
+                md.count += 1;
+                md.refresh();
+                return false;
+            }
+        }
+        let i = self.modes.partition_point(|md| md.hi < l);
+        if let Some(md) = self.modes.get_mut(i) {
+            if md.is_extended() && md.lo <= l {
+                md.count += 1;
+                md.refresh();
+                self.hint = i;
+                return false;
+            }
+        }
+        let Some((a, b)) = self.overlapped_ref(l, i) else {
+            self.modes.insert(i, Mode::new(l, l, 1));
+            return false;
+        };
+        // Span l and the overlapped modes, then absorb every mode meeting the span.
+        let (mut a, mut b) = (a, b);
+        let mut lo = l.min(self.modes[a].lo);
+        let mut hi = l.max(self.modes[b].hi);
+        while a > 0 && self.modes[a - 1].hi >= lo {
+            a -= 1;
+            lo = lo.min(self.modes[a].lo);
+        }
+        while b + 1 < self.modes.len() && self.modes[b + 1].lo <= hi {
+            b += 1;
+            hi = hi.max(self.modes[b].hi);
+        }
+        let count = self.modes[a..=b].iter().map(|m| m.count).sum::<u64>() + 1;
+        self.modes.splice(a..=b, [Mode::new(lo, hi, count)]);
+        let old = self.m;
+        self.m = self.m.max(hi);
+        self.m != old
     }
 
     /// [`Adr::overlapped`] by materialising every point: the literal reading, kept as the
