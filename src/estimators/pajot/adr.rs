@@ -116,22 +116,22 @@ fn pilot(xs: &[f64], p: &mut Vec<f64>) -> Option<Pilot> {
     Some(Pilot { nn, g })
 }
 
-/// A mode as ADR keeps it: the public triple plus the spacing and next-to-last point that the
-/// overlap search reads, computed once per change of the mode rather than once per search.
+/// A run of an overlap query: a mode, or the newcomer, with the spacing and next-to-last point
+/// the search reads (transient: computed per query, not kept with the modes).
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Mode {
-    pub(super) lo: f64,
-    pub(super) hi: f64,
-    pub(super) count: u64,
-    /// `(hi - lo) / (count - 1)` (0 for a single); NaN while stale, after `count` changed.
+struct Run {
+    lo: f64,
+    hi: f64,
+    count: u64,
+    /// `(hi - lo) / (count - 1)` (0 for a single).
     d: f64,
     /// Point `count - 2` ([`Seg::at`]); `lo` for a single.
     top: f64,
 }
 
-impl Mode {
+impl Run {
     /// A run below every point, bounding a query's walks.
-    const SENTINEL_BELOW: Mode = Mode {
+    const SENTINEL_BELOW: Run = Run {
         lo: f64::NEG_INFINITY,
         hi: f64::NEG_INFINITY,
         count: 0,
@@ -140,7 +140,7 @@ impl Mode {
     };
 
     /// A run above every point.
-    const SENTINEL_ABOVE: Mode = Mode {
+    const SENTINEL_ABOVE: Run = Run {
         lo: f64::INFINITY,
         hi: f64::INFINITY,
         count: 0,
@@ -148,44 +148,18 @@ impl Mode {
         top: f64::INFINITY,
     };
 
-    pub(super) fn new(lo: f64, hi: f64, count: u64) -> Mode {
-        let mut m = Mode {
-            lo,
-            hi,
-            count,
-            d: f64::NAN,
-            top: lo,
-        };
-        m.refresh();
-        m
-    }
-
-    fn refresh(&mut self) {
-        let seg = Seg::new(self.lo, self.hi, self.count);
-        self.d = seg.d;
-        self.top = seg.top;
-    }
-
-    /// One more sample inside the mode.
-    #[inline(always)]
-    fn bump(&mut self) {
-        self.count += 1;
-        self.d = f64::NAN;
-    }
-
-    pub(super) fn is_extended(&self) -> bool {
-        self.count >= 2
-    }
-
-    pub(super) fn public(&self) -> PajotMode {
-        PajotMode {
-            lo: self.lo,
-            hi: self.hi,
-            count: self.count,
+    fn of(m: &PajotMode) -> Run {
+        let seg = Seg::new(m.lo, m.hi, m.count);
+        Run {
+            lo: m.lo,
+            hi: m.hi,
+            count: m.count,
+            d: seg.d,
+            top: seg.top,
         }
     }
 
-    /// The run of the overlap search (spacing and next-to-last point as cached).
+    /// The run as a [`Seg`] (its `w` not yet set).
     #[inline(always)]
     fn seg(&self) -> Seg {
         Seg {
@@ -204,7 +178,7 @@ impl Mode {
 /// mode).
 #[derive(Debug, Clone)]
 pub(super) struct Adr {
-    pub(super) modes: Vec<Mode>,
+    pub(super) modes: Vec<PajotMode>,
     /// The acceptance bound (log units), `-inf` until an extended mode exists.
     pub(super) m: f64,
     /// Index of the mode the last sample fell in (a guess: checked before use).
@@ -222,10 +196,7 @@ impl Adr {
     #[cfg(test)]
     pub(super) fn with_modes(modes: &[PajotMode], m: f64) -> Adr {
         Adr {
-            modes: modes
-                .iter()
-                .map(|p| Mode::new(p.lo, p.hi, p.count))
-                .collect(),
+            modes: modes.to_vec(),
             m,
             hint: 0,
         }
@@ -233,12 +204,12 @@ impl Adr {
 
     /// The modes, ascending.
     pub(super) fn public_modes(&self) -> Vec<PajotMode> {
-        self.modes.iter().map(Mode::public).collect()
+        self.modes.clone()
     }
 
     /// Heap bytes held by the modes.
     pub(super) fn heap_bytes(&self) -> usize {
-        self.modes.capacity() * size_of::<Mode>()
+        self.modes.capacity() * size_of::<PajotMode>()
     }
 
     /// Numbers of single and extended modes.
@@ -257,7 +228,7 @@ impl Adr {
         for_each_run(
             logs,
             |i| logs[i] == logs[i + 1] || (logs[i + 1] - logs[i]).abs() < h[i] + h[i + 1],
-            |lo, hi, count| modes.push(Mode::new(lo, hi, count)),
+            |lo, hi, count| modes.push(PajotMode { lo, hi, count }),
         );
         let top = self
             .modes
@@ -291,7 +262,7 @@ impl Adr {
             };
             if let Some(md) = self.modes.get_mut(j) {
                 if md.is_extended() && md.lo <= l && l <= md.hi {
-                    md.bump();
+                    md.count += 1;
                     self.hint = j;
                     return false;
                 }
@@ -300,13 +271,20 @@ impl Adr {
         let i = self.modes.partition_point(|md| md.hi < l);
         if let Some(md) = self.modes.get_mut(i) {
             if md.is_extended() && md.lo <= l {
-                md.bump();
+                md.count += 1;
                 self.hint = i;
                 return false;
             }
         }
         let Some((a, b)) = self.overlapped(l, i) else {
-            self.modes.insert(i, Mode::new(l, l, 1));
+            self.modes.insert(
+                i,
+                PajotMode {
+                    lo: l,
+                    hi: l,
+                    count: 1,
+                },
+            );
             return false;
         };
         // Span l and the overlapped modes, then absorb every mode meeting the span.
@@ -322,7 +300,7 @@ impl Adr {
             hi = hi.max(self.modes[b].hi);
         }
         let count = self.modes[a..=b].iter().map(|m| m.count).sum::<u64>() + 1;
-        self.modes.splice(a..=b, [Mode::new(lo, hi, count)]);
+        self.modes.splice(a..=b, [PajotMode { lo, hi, count }]);
         let old = self.m;
         self.m = self.m.max(hi);
         self.m != old
@@ -333,31 +311,26 @@ impl Adr {
     /// the first mode whose top is `>= l` (`l` goes between modes `i - 1` and `i`).
     ///
     /// The point set is never materialised (module doc, decision 17): see [`Query`].
-    pub(super) fn overlapped(&mut self, l: f64, i: usize) -> Option<(usize, usize)> {
-        for m in &mut self.modes {
-            if m.d.is_nan() {
-                m.refresh();
-            }
-        }
+    pub(super) fn overlapped(&self, l: f64, i: usize) -> Option<(usize, usize)> {
         query(&self.modes, l, i, |q| q.overlapped())
     }
 }
 
-/// Runs `f` on the query of `l` (index `i`) among the fresh `modes`.
-fn query<T>(modes: &[Mode], l: f64, i: usize, f: impl FnOnce(&Query) -> T) -> T {
+/// Runs `f` on the query of `l` (index `i`) among `modes`.
+fn query<T>(modes: &[PajotMode], l: f64, i: usize, f: impl FnOnce(&Query) -> T) -> T {
     SCRATCH.with_borrow_mut(|runs| {
         runs.clear();
-        runs.push(Mode::SENTINEL_BELOW);
-        runs.extend_from_slice(&modes[..i]);
-        runs.push(Mode {
+        runs.push(Run::SENTINEL_BELOW);
+        runs.extend(modes[..i].iter().map(Run::of));
+        runs.push(Run {
             lo: l,
             hi: l,
             count: 1,
             d: 0.0,
             top: l,
         });
-        runs.extend_from_slice(&modes[i..]);
-        runs.push(Mode::SENTINEL_ABOVE);
+        runs.extend(modes[i..].iter().map(Run::of));
+        runs.push(Run::SENTINEL_ABOVE);
         let mut total: u64 = 0;
         for m in modes {
             total = total.saturating_add(m.count);
@@ -374,7 +347,7 @@ fn query<T>(modes: &[Mode], l: f64, i: usize, f: impl FnOnce(&Query) -> T) -> T 
 
 thread_local! {
     /// The runs of the current query: transient, not part of any pixel's state.
-    static SCRATCH: std::cell::RefCell<Vec<Mode>> = const { std::cell::RefCell::new(Vec::new()) };
+    static SCRATCH: std::cell::RefCell<Vec<Run>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// One run of ADR's point set: a mode's evenly spaced points, or the newcomer alone.
@@ -583,7 +556,7 @@ fn ceil(x: f64) -> f64 {
 struct Query<'a> {
     /// The runs in order, between two sentinels: run `t` is `runs[t + 1]`, the newcomer is
     /// run `i`, and modes keep their index below it and shift by one above.
-    runs: &'a [Mode],
+    runs: &'a [Run],
     l: f64,
     i: usize,
     /// Number of points.

@@ -164,7 +164,8 @@ fn sorted_with_logs(mut values: Vec<f64>, rot: Option<&mut Rot>) -> (Vec<f64>, V
             rot.observe(s.ln());
         }
     }
-    values.sort_by(f64::total_cmp);
+    // Equal positive samples are equal bits, so an unstable sort gives the same list.
+    values.sort_unstable_by(f64::total_cmp);
     let logs = values.iter().map(|s| s.ln()).collect();
     (values, logs)
 }

@@ -1,9 +1,9 @@
 //! The first implementation of [`Adr::update`], kept as the bit-for-bit oracle of the faster
 //! one: its search (the last mode hit, else a binary search) and its overlap search (an
-//! implicit point set in an allocated list of runs), verbatim but for the storage of the modes;
-//! and the literal reading, which materialises every point.
+//! implicit point set in an allocated list of runs), verbatim; and the literal reading, which
+//! materialises every point.
 
-use super::{Adr, Mode, PajotMode, Pilot, pilot};
+use super::{Adr, PajotMode, Pilot, pilot};
 use std::cell::Cell;
 
 thread_local! {
@@ -29,7 +29,6 @@ impl Adr {
         if let Some(md) = self.modes.get_mut(self.hint) {
             if md.is_extended() && md.lo <= l && l <= md.hi {
                 md.count += 1;
-                md.refresh();
                 return false;
             }
         }
@@ -37,13 +36,19 @@ impl Adr {
         if let Some(md) = self.modes.get_mut(i) {
             if md.is_extended() && md.lo <= l {
                 md.count += 1;
-                md.refresh();
                 self.hint = i;
                 return false;
             }
         }
         let Some((a, b)) = self.overlapped_ref(l, i) else {
-            self.modes.insert(i, Mode::new(l, l, 1));
+            self.modes.insert(
+                i,
+                PajotMode {
+                    lo: l,
+                    hi: l,
+                    count: 1,
+                },
+            );
             return false;
         };
         // Span l and the overlapped modes, then absorb every mode meeting the span.
@@ -59,7 +64,7 @@ impl Adr {
             hi = hi.max(self.modes[b].hi);
         }
         let count = self.modes[a..=b].iter().map(|m| m.count).sum::<u64>() + 1;
-        self.modes.splice(a..=b, [Mode::new(lo, hi, count)]);
+        self.modes.splice(a..=b, [PajotMode { lo, hi, count }]);
         let old = self.m;
         self.m = self.m.max(hi);
         self.m != old
@@ -73,7 +78,7 @@ impl Adr {
         l: f64,
         i: usize,
     ) -> Option<(usize, usize)> {
-        let modes = self.public_modes();
+        let modes = &self.modes;
         let total: u64 = modes.iter().map(|m| m.count).sum();
         let mut xs = Vec::with_capacity(usize::try_from(total).unwrap_or(0).saturating_add(1));
         for md in &modes[..i] {
@@ -149,7 +154,7 @@ impl Adr {
         l: f64,
         i: usize,
     ) -> Option<(usize, usize)> {
-        let modes = self.public_modes();
+        let modes = &self.modes;
         let mut set = PointSet::new(&modes, l, i);
         let Some((nn, g)) = set.pilot() else {
             // Every bandwidth is 0: only a point equal to l overlaps it, and the only point
