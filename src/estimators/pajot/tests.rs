@@ -259,7 +259,7 @@ fn adr_implicit_point_set_matches_materialised() {
         if modes.get(i).is_some_and(|m| m.is_extended() && m.lo <= l) {
             continue;
         }
-        let mut adr = Adr::with_modes(&modes, f64::NEG_INFINITY);
+        let adr = Adr::with_modes(&modes, f64::NEG_INFINITY);
         // Skip near ties of the literal computation.
         let mut xs: Vec<f64> = modes
             .iter()
@@ -401,7 +401,7 @@ fn adr_overlapped_equals_reference() {
         if modes.get(i).is_some_and(|m| m.is_extended() && m.lo <= l) {
             continue;
         }
-        let mut adr = Adr::with_modes(&modes, f64::NEG_INFINITY);
+        let adr = Adr::with_modes(&modes, f64::NEG_INFINITY);
         let want = adr.overlapped_ref(l, i);
         assert_eq!(adr.overlapped(l, i), want, "l = {l}, modes = {modes:?}");
         merged += usize::from(want.is_some());

@@ -155,7 +155,7 @@ impl Adr {
         i: usize,
     ) -> Option<(usize, usize)> {
         let modes = &self.modes;
-        let mut set = PointSet::new(&modes, l, i);
+        let mut set = PointSet::new(modes, l, i);
         let Some((nn, g)) = set.pilot() else {
             // Every bandwidth is 0: only a point equal to l overlaps it, and the only point
             // that can equal l is a single mode just after it.
