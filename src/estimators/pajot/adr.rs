@@ -537,7 +537,7 @@ fn ceil(x: f64) -> f64 {
 }
 
 /// ADR's point set for one newcomer: the modes' runs with `l` inserted as a single run at
-/// index `i` (run `t` is mode `t` below `i` and mode `t - 1` above it), read in place.
+/// index `i` (run `t` is mode `t` below `i` and mode `t - 1` above it).
 ///
 /// An extended mode stands for `c` evenly spaced points; all but the `w + 1` at each end see
 /// exactly `w` neighbours on each side within `nn` and none outside the mode, so they share one
@@ -546,13 +546,15 @@ fn ceil(x: f64) -> f64 {
 /// neighbours are taken at the exact spacing `d`, which differs from the rounded point values
 /// by a rounding error; a neighbour at the window's edge contributes ~0 either way.
 ///
-/// Cost per newcomer: `O(modes)` floating-point operations without allocating or dividing,
-/// and `O(w)` more with one `ln` per mode whose points have neighbours within `nn`. A run
-/// lying at least `nn` from both neighbouring runs gets no term from them, so a point's pilot
-/// value is its in-run part alone, and 1 when the run's spacing is at least `nn` (`w = 0`):
-/// such points change neither the product nor the sum of logs, and are skipped. The checks use
-/// the run's extreme points, so the values are those of a walk over the neighbours (the unit
-/// tests compare with the first implementation, which walked, bit for bit).
+/// Cost per newcomer, without allocating (the runs live in a per-thread scratch list): two
+/// divisions per extended mode for its spacing and next-to-last point, `O(modes)` additions
+/// and comparisons, and `O(w)` more with one `ln` per run whose points have a neighbour
+/// within `nn`. A run lying at least `nn` from both neighbouring runs gets no term from them,
+/// so a point's pilot value is its in-run part alone, and 1 when the run's spacing is at least
+/// `nn` (`w = 0`): such points change neither the product nor the sum of logs, and are
+/// skipped. The checks use the run's extreme points, so the values are those of a walk over
+/// the neighbours: the unit tests compare with the first implementation, which walked, bit
+/// for bit.
 struct Query<'a> {
     /// The runs in order, between two sentinels: run `t` is `runs[t + 1]`, the newcomer is
     /// run `i`, and modes keep their index below it and shift by one above.
