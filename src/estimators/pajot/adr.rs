@@ -3,6 +3,9 @@
 
 use super::for_each_run;
 
+#[cfg(test)]
+pub(super) mod reference;
+
 /// One mode of ADR's approximate distribution representation, in log-luminance units.
 ///
 /// A single mode has `count == 1` and `lo == hi`; an extended mode (`count >= 2`) stands for
@@ -113,6 +116,64 @@ fn pilot(xs: &[f64], p: &mut Vec<f64>) -> Option<Pilot> {
     Some(Pilot { nn, g })
 }
 
+/// A run of an overlap query: a mode, or the newcomer, with the spacing and next-to-last point
+/// the search reads (transient: computed per query, not kept with the modes).
+#[derive(Debug, Clone, Copy)]
+struct Run {
+    lo: f64,
+    hi: f64,
+    count: u64,
+    /// `(hi - lo) / (count - 1)` (0 for a single).
+    d: f64,
+    /// Point `count - 2` ([`Seg::at`]); `lo` for a single.
+    top: f64,
+}
+
+impl Run {
+    /// A run below every point, bounding a query's walks.
+    const SENTINEL_BELOW: Run = Run {
+        lo: f64::NEG_INFINITY,
+        hi: f64::NEG_INFINITY,
+        count: 0,
+        d: 0.0,
+        top: f64::NEG_INFINITY,
+    };
+
+    /// A run above every point.
+    const SENTINEL_ABOVE: Run = Run {
+        lo: f64::INFINITY,
+        hi: f64::INFINITY,
+        count: 0,
+        d: 0.0,
+        top: f64::INFINITY,
+    };
+
+    fn of(m: &PajotMode) -> Run {
+        let seg = Seg::new(m.lo, m.hi, m.count);
+        Run {
+            lo: m.lo,
+            hi: m.hi,
+            count: m.count,
+            d: seg.d,
+            top: seg.top,
+        }
+    }
+
+    /// The run as a [`Seg`] (its `w` not yet set).
+    #[inline(always)]
+    fn seg(&self) -> Seg {
+        Seg {
+            lo: self.lo,
+            hi: self.hi,
+            c: self.count,
+            d: self.d,
+            w: 0,
+            r: 0.0,
+            top: self.top,
+        }
+    }
+}
+
 /// ADR's state: the ordered, disjoint modes and the bound `m` (the top of the last extended
 /// mode).
 #[derive(Debug, Clone)]
@@ -130,6 +191,21 @@ impl Adr {
         m: f64::NEG_INFINITY,
         hint: 0,
     };
+
+    /// ADR holding `modes` (ascending, disjoint) and the bound `m`.
+    #[cfg(test)]
+    pub(super) fn with_modes(modes: &[PajotMode], m: f64) -> Adr {
+        Adr {
+            modes: modes.to_vec(),
+            m,
+            hint: 0,
+        }
+    }
+
+    /// The modes, ascending.
+    pub(super) fn public_modes(&self) -> Vec<PajotMode> {
+        self.modes.clone()
+    }
 
     /// Heap bytes held by the modes.
     pub(super) fn heap_bytes(&self) -> usize {
@@ -168,11 +244,28 @@ impl Adr {
     /// After learning, adds a non-black `l` to the representation (docs/estimators.md §6.3). Returns whether
     /// `m` changed.
     pub(super) fn update(&mut self, l: f64) -> bool {
-        // Most samples fall in the mode the previous one fell in: try it before searching.
-        if let Some(md) = self.modes.get_mut(self.hint) {
-            if md.is_extended() && md.lo <= l && l <= md.hi {
-                md.count += 1;
-                return false;
+        #[cfg(test)]
+        if reference::reference() {
+            return self.update_ref(l);
+        }
+
+        // Most samples fall in the mode the previous one fell in, or in its neighbour on their
+        // side: try those before searching.
+        let h = self.hint;
+        if let Some(md) = self.modes.get(h) {
+            let j = if l < md.lo {
+                h.wrapping_sub(1)
+            } else if l > md.hi {
+                h + 1
+            } else {
+                h
+            };
+            if let Some(md) = self.modes.get_mut(j) {
+                if md.is_extended() && md.lo <= l && l <= md.hi {
+                    md.count += 1;
+                    self.hint = j;
+                    return false;
+                }
             }
         }
         let i = self.modes.partition_point(|md| md.hi < l);
@@ -213,123 +306,48 @@ impl Adr {
         self.m != old
     }
 
-    /// [`Adr::overlapped`] by materialising every point: the literal reading, kept as the
-    /// oracle of the unit tests.
-    #[cfg(test)]
-    pub(super) fn overlapped_naive(&self, l: f64, i: usize) -> Option<(usize, usize)> {
-        let total: u64 = self.modes.iter().map(|m| m.count).sum();
-        let mut xs = Vec::with_capacity(usize::try_from(total).unwrap_or(0).saturating_add(1));
-        for md in &self.modes[..i] {
-            xs.extend(md.points());
-        }
-        let pos = xs.len();
-        xs.push(l);
-        for md in &self.modes[i..] {
-            xs.extend(md.points());
-        }
-        let mut p = Vec::new();
-        let pilot = pilot(&xs, &mut p);
-        let h = |j: usize| pilot.map_or(0.0, |Pilot { nn, g }| nn * (g / p[j]).sqrt());
-        let h_l = h(pos);
-        let h_max = pilot.map_or(0.0, |Pilot { nn, g }| {
-            let p_min = p.iter().copied().fold(f64::INFINITY, f64::min);
-            nn * (g / p_min).sqrt()
-        });
-        let reach = h_l + h_max;
-        let hits = |j: usize| xs[j] == l || (l - xs[j]).abs() < h_l + h(j);
-
-        // Scan left of l, tracking which mode each point belongs to.
-        let mut first = None;
-        if i > 0 {
-            let mut mode = i - 1;
-            let mut start = pos - self.modes[mode].count as usize;
-            for j in (0..pos).rev() {
-                if xs[j] != l && !(l - xs[j] < reach) {
-                    break;
-                }
-                while j < start {
-                    mode -= 1;
-                    start -= self.modes[mode].count as usize;
-                }
-                if hits(j) {
-                    first = Some(mode);
-                }
-            }
-        }
-        let mut last = None;
-        if i < self.modes.len() {
-            let mut mode = i;
-            let mut end = pos + 1 + self.modes[mode].count as usize;
-            for (j, &x) in xs.iter().enumerate().skip(pos + 1) {
-                if x != l && !(x - l < reach) {
-                    break;
-                }
-                while j >= end {
-                    mode += 1;
-                    end += self.modes[mode].count as usize;
-                }
-                if hits(j) {
-                    last = Some(mode);
-                }
-            }
-        }
-        match (first, last) {
-            (None, None) => None,
-            (Some(a), None) => Some((a, i - 1)),
-            (None, Some(b)) => Some((i, b)),
-            (Some(a), Some(b)) => Some((a, b)),
-        }
-    }
-
     /// The range of modes (first, last) having a point that `l` overlaps under the eq. 4
     /// bandwidths of all modes' points plus `l`; `None` if no point overlaps. `i` is the index of
     /// the first mode whose top is `>= l` (`l` goes between modes `i - 1` and `i`).
     ///
-    /// The point set is never materialised (module doc, Cost): see [`PointSet`].
+    /// The point set is never materialised (module doc, decision 17): see [`Query`].
     pub(super) fn overlapped(&self, l: f64, i: usize) -> Option<(usize, usize)> {
-        let mut set = PointSet::new(&self.modes, l, i);
-        let Some((nn, g)) = set.pilot() else {
-            // Every bandwidth is 0: only a point equal to l overlaps it, and the only point
-            // that can equal l is a single mode just after it.
-            return self.modes.get(i).filter(|m| m.lo == l).map(|_| (i, i));
-        };
-        let h = |s: usize, k: u64| nn * (g / set.p_at(s, k, nn)).sqrt();
-        let h_l = h(i, 0);
-        // Every p >= 1 (its own term), so no h exceeds nn sqrt(g).
-        let reach = h_l + nn * g.sqrt();
-        let hits = |x: f64, s: usize, k: u64| x == l || (l - x).abs() < h_l + h(s, k);
-
-        let mut first = None;
-        'left: for s in (0..i).rev() {
-            for k in set.order(s, true) {
-                let x = set.segs[s].at(k);
-                if x != l && !(l - x < reach) {
-                    break 'left;
-                }
-                if hits(x, s, k) {
-                    first = Some(s);
-                }
-            }
-        }
-        let mut last = None;
-        'right: for s in i + 1..set.segs.len() {
-            for k in set.order(s, false) {
-                let x = set.segs[s].at(k);
-                if x != l && !(x - l < reach) {
-                    break 'right;
-                }
-                if hits(x, s, k) {
-                    last = Some(s - 1);
-                }
-            }
-        }
-        match (first, last) {
-            (None, None) => None,
-            (Some(a), None) => Some((a, i - 1)),
-            (None, Some(b)) => Some((i, b)),
-            (Some(a), Some(b)) => Some((a, b)),
-        }
+        query(&self.modes, l, i, |q| q.overlapped())
     }
+}
+
+/// Runs `f` on the query of `l` (index `i`) among `modes`.
+fn query<T>(modes: &[PajotMode], l: f64, i: usize, f: impl FnOnce(&Query) -> T) -> T {
+    SCRATCH.with_borrow_mut(|runs| {
+        runs.clear();
+        runs.push(Run::SENTINEL_BELOW);
+        runs.extend(modes[..i].iter().map(Run::of));
+        runs.push(Run {
+            lo: l,
+            hi: l,
+            count: 1,
+            d: 0.0,
+            top: l,
+        });
+        runs.extend(modes[i..].iter().map(Run::of));
+        runs.push(Run::SENTINEL_ABOVE);
+        let mut total: u64 = 0;
+        for m in modes {
+            total = total.saturating_add(m.count);
+        }
+        let points = if total < 1 << 52 {
+            // Every partial sum of the f64 counts is an exact integer: the same value.
+            total as f64 + 1.0
+        } else {
+            modes.iter().map(|m| m.count as f64).sum::<f64>() + 1.0
+        };
+        f(&Query { runs, l, i, points })
+    })
+}
+
+thread_local! {
+    /// The runs of the current query: transient, not part of any pixel's state.
+    static SCRATCH: std::cell::RefCell<Vec<Run>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// One run of ADR's point set: a mode's evenly spaced points, or the newcomer alone.
@@ -342,16 +360,61 @@ struct Seg {
     d: f64,
     /// How many same-run neighbours on each side lie closer than `nn` (`j d < nn`).
     w: u64,
+    /// The spacing in units of `nn`, `d / nn` (set with `w`).
+    r: f64,
+    /// The next-to-last point, [`Seg::at`]`(c - 2)` (`lo` for a single). Every point but `hi`
+    /// lies in `[lo, top]` (the formula is monotone in `k`), and `top` may exceed `hi` by
+    /// rounding.
+    top: f64,
 }
 
 impl Seg {
     fn new(lo: f64, hi: f64, c: u64) -> Seg {
         let d = if c >= 2 {
-            (hi - lo) / (c - 1) as f64
+            (hi - lo) / to_f64(c - 1)
         } else {
             0.0
         };
-        Seg { lo, hi, c, d, w: 0 }
+        let mut seg = Seg {
+            lo,
+            hi,
+            c,
+            d,
+            w: 0,
+            r: 0.0,
+            top: lo,
+        };
+        if c >= 2 {
+            seg.top = seg.formula(c - 2);
+        }
+        seg
+    }
+
+    /// The newcomer `l`.
+    fn single(l: f64) -> Seg {
+        Seg {
+            lo: l,
+            hi: l,
+            c: 1,
+            d: 0.0,
+            w: 0,
+            r: 0.0,
+            top: l,
+        }
+    }
+
+    /// This run with its `w` for the mean nearest-neighbour distance `nn`.
+    fn with_w(mut self, nn: f64) -> Seg {
+        self.r = self.d / nn;
+        self.w = if self.c < 2 {
+            0
+        } else if self.is_point() || nn / self.d > to_f64(self.c - 1) {
+            self.c - 1
+        } else {
+            // The largest integer j with j d < nn.
+            (ceil(nn / self.d) - 1.0).max(0.0) as u64
+        };
+        self
     }
 
     /// Point `k` (docs/estimators.md §6.3's formula; the last one is `hi`).
@@ -359,9 +422,19 @@ impl Seg {
     fn at(&self, k: u64) -> f64 {
         if k + 1 >= self.c {
             self.hi
+        } else if k == 0 {
+            // The formula's term is +0.
+            self.lo + 0.0
+        } else if k + 2 == self.c {
+            self.top
         } else {
-            self.lo + ((self.hi - self.lo) * k as f64) / (self.c - 1) as f64
+            self.formula(k)
         }
+    }
+
+    /// `lo + ((hi - lo) k) / (c - 1)` (`c >= 2`).
+    fn formula(&self, k: u64) -> f64 {
+        self.lo + ((self.hi - self.lo) * to_f64(k)) / to_f64(self.c - 1)
     }
 
     /// Whether every point coincides (a single, or `lo == hi`).
@@ -374,135 +447,335 @@ impl Seg {
     fn has_interior(&self) -> bool {
         !self.is_point() && self.c > 2 * self.w + 2
     }
+
+    /// The points of the run to test for overlap, nearest to the newcomer first (`from_top`:
+    /// the run lies below it). The interior points all share one bandwidth, so only the
+    /// nearest of them is listed: if it misses, the farther ones miss too.
+    fn nearest_first(&self, from_top: bool) -> Nearest {
+        let (c, w) = (self.c, self.w);
+        // Ascending: the bottom points, the one interior point listed, the top points.
+        let (bottom, mid, top) = if self.is_point() {
+            (0..1, 0..0, c..c)
+        } else if self.has_interior() {
+            let m = if from_top { c - 2 - w } else { w + 1 };
+            (0..w + 1, m..m + 1, c - 1 - w..c)
+        } else {
+            (0..c, 0..0, c..c)
+        };
+        Nearest {
+            ranges: if from_top {
+                [top, mid, bottom]
+            } else {
+                [bottom, mid, top]
+            },
+            from_top,
+            at: 0,
+        }
+    }
+}
+
+/// Point indices of a run, nearest to the newcomer first ([`Seg::nearest_first`]): three
+/// ranges in turn, each walked downwards when the run lies below the newcomer.
+struct Nearest {
+    ranges: [std::ops::Range<u64>; 3],
+    from_top: bool,
+    at: usize,
+}
+
+impl Iterator for Nearest {
+    type Item = u64;
+
+    fn next(&mut self) -> Option<u64> {
+        while let Some(r) = self.ranges.get_mut(self.at) {
+            let k = if self.from_top {
+                r.next_back()
+            } else {
+                r.next()
+            };
+            if k.is_some() {
+                return k;
+            }
+            self.at += 1;
+        }
+        None
+    }
 }
 
 /// `Σ_{j=1..w} (1 - (j r)^2)`: the Epanechnikov pilot terms of `w` evenly spaced neighbours at
 /// spacing `r` (in units of `nn`).
 fn kernel_sum(w: u64, r: f64) -> f64 {
-    let w = w as f64;
+    let w = to_f64(w);
     w - r * r * w * (w + 1.0) * (2.0 * w + 1.0) / 6.0
 }
 
-/// ADR's point set (every mode's points plus the newcomer) without materialising it.
+/// `a.min(b)` for operands that are never NaN nor `-0` (distances between logs), in one
+/// instruction rather than `f64::min`'s several.
+#[inline(always)]
+fn min(a: f64, b: f64) -> f64 {
+    if b < a { b } else { a }
+}
+
+/// `c as f64` (the signed conversion is one instruction on x86-64, the unsigned one several).
+#[inline(always)]
+fn to_f64(c: u64) -> f64 {
+    match i64::try_from(c) {
+        Ok(c) => c as f64,
+        Err(_) => c as f64,
+    }
+}
+
+/// `x.ceil()` without a library call (baseline x86-64 has no rounding instruction).
+#[inline(always)]
+fn ceil(x: f64) -> f64 {
+    if x.abs() < (1u64 << 52) as f64 {
+        // |x| < 2^52: the truncation is exact, and the ceiling is it or the next integer.
+        let t = x as i64 as f64;
+        if t < x { t + 1.0 } else { t }
+    } else {
+        x.ceil()
+    }
+}
+
+/// ADR's point set for one newcomer: the modes' runs with `l` inserted as a single run at
+/// index `i` (run `t` is mode `t` below `i` and mode `t - 1` above it).
 ///
 /// An extended mode stands for `c` evenly spaced points; all but the `w + 1` at each end see
 /// exactly `w` neighbours on each side within `nn` and none outside the mode, so they share one
 /// pilot value `1 + 2 Σ_{j<=w} (1 - (j d / nn)^2)`. Those are counted in closed form; the end
-/// points, and points whose window reaches another mode, are evaluated one by one. Same-mode
+/// points, and points whose window reaches another run, are evaluated one by one. Same-mode
 /// neighbours are taken at the exact spacing `d`, which differs from the rounded point values
-/// by a rounding error; a neighbour at the window's edge contributes ~0 either way. Cost per
-/// newcomer: `O(modes + Σ min(c, w))` instead of `O(n)` points.
-struct PointSet {
-    segs: Vec<Seg>,
+/// by a rounding error; a neighbour at the window's edge contributes ~0 either way.
+///
+/// Cost per newcomer, without allocating (the runs live in a per-thread scratch list): two
+/// divisions per extended mode for its spacing and next-to-last point, `O(modes)` additions
+/// and comparisons, and `O(w)` more with one `ln` per run whose points have a neighbour
+/// within `nn`. A run lying at least `nn` from both neighbouring runs gets no term from them,
+/// so a point's pilot value is its in-run part alone, and 1 when the run's spacing is at least
+/// `nn` (`w = 0`): such points change neither the product nor the sum of logs, and are
+/// skipped. The checks use the run's extreme points, so the values are those of a walk over
+/// the neighbours: the unit tests compare with the first implementation, which walked, bit
+/// for bit.
+struct Query<'a> {
+    /// The runs in order, between two sentinels: run `t` is `runs[t + 1]`, the newcomer is
+    /// run `i`, and modes keep their index below it and shift by one above.
+    runs: &'a [Run],
+    l: f64,
+    i: usize,
     /// Number of points.
-    k: f64,
+    points: f64,
 }
 
-impl PointSet {
-    fn new(modes: &[PajotMode], l: f64, i: usize) -> PointSet {
-        let mut segs = Vec::with_capacity(modes.len() + 1);
-        segs.extend(modes[..i].iter().map(|m| Seg::new(m.lo, m.hi, m.count)));
-        segs.push(Seg::new(l, l, 1));
-        segs.extend(modes[i..].iter().map(|m| Seg::new(m.lo, m.hi, m.count)));
-        let k = modes.iter().map(|m| m.count as f64).sum::<f64>() + 1.0;
-        PointSet { segs, k }
-    }
+impl Query<'_> {
+    /// [`Adr::overlapped`].
+    fn overlapped(&self) -> Option<(usize, usize)> {
+        let (l, i) = (self.l, self.i);
+        let Some((nn, g)) = self.pilot() else {
+            // Every bandwidth is 0: only a point equal to l overlaps it, and the only point
+            // that can equal l is a single mode just after it.
+            return (self.runs[i + 2].lo == l).then_some((i, i));
+        };
+        let h = |s: usize, seg: &Seg, k: u64| nn * (g / self.p_at(s, seg, k, nn)).sqrt();
+        let h_l = h(i, &Seg::single(l), 0);
+        // Every p >= 1 (its own term), so no h exceeds nn sqrt(g).
+        let reach = h_l + nn * g.sqrt();
+        // A distance below h_l is below h_l + h_x whatever h_x >= 0 (rounding is monotone).
+        let hits = |x: f64, s: usize, seg: &Seg, k: u64| {
+            let dist = (l - x).abs();
+            x == l || dist < h_l || dist < h_l + h(s, seg, k)
+        };
 
-    /// `nn` and `g` of eq. 4, or `None` when every bandwidth is 0. Sets each run's `w`.
-    fn pilot(&mut self) -> Option<(f64, f64)> {
-        if self.k < 2.0 {
-            return None;
-        }
-        // Mean distance to the nearest other point.
-        let n = self.segs.len();
-        let mut nn_sum = 0.0;
-        for s in 0..n {
-            let seg = self.segs[s];
-            let prev = if s > 0 {
-                seg.lo - self.segs[s - 1].hi
-            } else {
-                f64::INFINITY
-            };
-            let next = if s + 1 < n {
-                self.segs[s + 1].lo - seg.hi
-            } else {
-                f64::INFINITY
-            };
-            if seg.c == 1 {
-                nn_sum += prev.min(next);
-            } else {
-                nn_sum += prev.min(seg.at(1) - seg.lo);
-                nn_sum += next.min(seg.hi - seg.at(seg.c - 2));
-                nn_sum += (seg.c - 2) as f64 * seg.d;
+        // Only the farthest mode with a hit matters on each side: once a point of a mode hits,
+        // its other points need no test (those of the next mode are farther still).
+        let mut first = None;
+        'left: for s in (0..i).rev() {
+            let seg = self.runs[s + 1].seg().with_w(nn);
+            for k in seg.nearest_first(true) {
+                let x = seg.at(k);
+                if x != l && !(l - x < reach) {
+                    break 'left;
+                }
+                if hits(x, s, &seg, k) {
+                    first = Some(s);
+                    break;
+                }
             }
         }
-        let nn = nn_sum / self.k;
+        let mut last = None;
+        'right: for s in i + 1..self.runs.len() - 2 {
+            let seg = self.runs[s + 1].seg().with_w(nn);
+            for k in seg.nearest_first(false) {
+                let x = seg.at(k);
+                if x != l && !(x - l < reach) {
+                    break 'right;
+                }
+                if hits(x, s, &seg, k) {
+                    last = Some(s - 1);
+                    break;
+                }
+            }
+        }
+        match (first, last) {
+            (None, None) => None,
+            (Some(a), None) => Some((a, i - 1)),
+            (None, Some(b)) => Some((i, b)),
+            (Some(a), Some(b)) => Some((a, b)),
+        }
+    }
+
+    /// `nn` and `g` of eq. 4, or `None` when every bandwidth is 0.
+    fn pilot(&self) -> Option<(f64, f64)> {
+        let k = self.points;
+        if k < 2.0 {
+            return None;
+        }
+        // Mean distance to the nearest other point, summed run by run in order.
+        let mut nn_sum = 0.0;
+        for w in self.runs.windows(3) {
+            let (below, r, above) = (&w[0], &w[1], &w[2]);
+            let (prev, next) = (r.lo - below.hi, above.lo - r.hi);
+            if r.count == 1 {
+                nn_sum += min(prev, next);
+            } else {
+                nn_sum += min(prev, r.seg().at(1) - r.lo);
+                nn_sum += min(next, r.hi - r.top);
+                nn_sum += to_f64(r.count - 2) * r.d;
+            }
+        }
+        let nn = nn_sum / k;
         if !(nn > 0.0 && nn.is_finite()) {
             return None;
         }
-        for seg in &mut self.segs {
-            seg.w = if seg.c < 2 {
-                0
-            } else if seg.is_point() || nn / seg.d > (seg.c - 1) as f64 {
-                seg.c - 1
-            } else {
-                // The largest integer j with j d < nn.
-                ((nn / seg.d).ceil() - 1.0).max(0.0) as u64
-            };
-        }
-        // ln g = mean of ln p, as logs of partial products (every p >= 1).
+        // ln g = mean of ln p, as logs of partial products (every p >= 1). A factor 1 changes
+        // nothing, nor does adding ln 1 = 0 (ln_sum is never -0), so such points are skipped.
         let mut ln_sum = 0.0;
         let mut product = 1.0;
         let mut take = |p: f64, ln_sum: &mut f64| {
-            product *= p;
-            if product > 1e200 {
-                *ln_sum += product.ln();
-                product = 1.0;
+            if p != 1.0 {
+                product *= p;
+                if product > 1e200 {
+                    *ln_sum += product.ln();
+                    product = 1.0;
+                }
             }
         };
-        for s in 0..n {
-            let seg = self.segs[s];
-            if seg.c >= 2 && seg.is_point() {
-                ln_sum += seg.c as f64 * self.p_at(s, 0, nn).ln();
-            } else if seg.has_interior() {
-                for k in (0..=seg.w).chain(seg.c - 1 - seg.w..seg.c) {
-                    take(self.p_at(s, k, nn), &mut ln_sum);
-                }
-                let interior = (seg.c - 2 * seg.w - 2) as f64;
-                ln_sum += interior * (1.0 + 2.0 * kernel_sum(seg.w, seg.d / nn)).ln();
-            } else {
-                for k in 0..seg.c {
-                    take(self.p_at(s, k, nn), &mut ln_sum);
-                }
+        for (s, w) in self.runs.windows(3).enumerate() {
+            let (below, r, above) = (&w[0], &w[1], &w[2]);
+            // The least distance from the run's points, which lie in [lo, top] and at hi, to
+            // another run's: no other run within nn when nn <= far.
+            let far = min(min(r.lo - below.hi, above.lo - r.hi), above.lo - r.top);
+            // Every p is then 1 for a single, and for an extended run with w = 0, which holds
+            // exactly when nn / d rounds to at most 1, that is when nn <= d (d > 0): the
+            // in-run part is 1 + (K(0) + K(0)) = 1, unless r^2 overflows (K(0) is then NaN,
+            // as in the literal form).
+            if nn <= far && (r.count == 1 || r.d > 0.0 && nn <= r.d && r.d <= nn * 1e150) {
+                continue;
             }
+            let seg = r.seg().with_w(nn);
+            let (c, w) = (seg.c, seg.w);
+            if nn <= far && seg.has_interior() && w < 8 {
+                // The common case, alone with a few neighbours on each side: the bottom points
+                // k = 0..=w have p = 1 + (K(k) + K(w)), the top ones mirror them, and the
+                // interior points share 1 + 2 K(w).
+                let mut p = [0.0; 8];
+                let kw = kernel_sum(w, seg.r);
+                for (j, pj) in p[..=w as usize].iter_mut().enumerate() {
+                    *pj = 1.0 + (kernel_sum(j as u64, seg.r) + kw);
+                }
+                for &pj in &p[..=w as usize] {
+                    take(pj, &mut ln_sum);
+                }
+                for &pj in p[..=w as usize].iter().rev() {
+                    take(pj, &mut ln_sum);
+                }
+                let p_int = 1.0 + 2.0 * kw;
+                if p_int != 1.0 {
+                    ln_sum += to_f64(c - 2 * w - 2) * p_int.ln();
+                }
+                continue;
+            }
+            self.add_logs(s, seg, nn <= far, nn, &mut take, &mut ln_sum);
         }
         ln_sum += product.ln();
-        Some((nn, (ln_sum / self.k).exp()))
+        Some((nn, (ln_sum / k).exp()))
     }
 
-    /// The pilot `p` at point `k` of run `s`: itself, its own run's neighbours within `nn`, and
-    /// other runs' points within `nn`.
-    fn p_at(&self, s: usize, k: u64, nn: f64) -> f64 {
-        let seg = self.segs[s];
+    /// The terms of run `s` (`seg`, with its `w`) in the pilot's `ln g`, in order: `take` for
+    /// the points evaluated one by one, then the interior's share. `alone`: no other run lies
+    /// within `nn` of its points.
+    #[inline(never)]
+    fn add_logs(
+        &self,
+        s: usize,
+        seg: Seg,
+        alone: bool,
+        nn: f64,
+        take: &mut impl FnMut(f64, &mut f64),
+        ln_sum: &mut f64,
+    ) {
+        let (c, w) = (seg.c, seg.w);
+        if c == 1 {
+            take(self.p_at(s, &seg, 0, nn), ln_sum);
+            return;
+        }
+        if seg.is_point() {
+            *ln_sum += to_f64(c) * self.p_at(s, &seg, 0, nn).ln();
+            return;
+        }
+        let r = seg.r;
+        if seg.has_interior() {
+            let kw = kernel_sum(w, r);
+            if alone {
+                // Bottom points k = 0..=w: 1 + (K(k) + K(w)); the top ones mirror them.
+                for j in 0..=w {
+                    take(1.0 + (kernel_sum(j, r) + kw), ln_sum);
+                }
+                for j in (0..=w).rev() {
+                    take(1.0 + (kw + kernel_sum(j, r)), ln_sum);
+                }
+            } else {
+                for k in (0..=w).chain(c - 1 - w..c) {
+                    take(self.p_at(s, &seg, k, nn), ln_sum);
+                }
+            }
+            let p_int = 1.0 + 2.0 * kw;
+            if p_int != 1.0 {
+                *ln_sum += to_f64(c - 2 * w - 2) * p_int.ln();
+            }
+        } else {
+            for k in 0..c {
+                let p = if alone {
+                    1.0 + (kernel_sum(k.min(w), r) + kernel_sum((c - 1 - k).min(w), r))
+                } else {
+                    self.p_at(s, &seg, k, nn)
+                };
+                take(p, ln_sum);
+            }
+        }
+    }
+
+    /// The pilot `p` at point `k` of run `s` (`seg`, with its `w`): itself, its own run's
+    /// neighbours within `nn`, and other runs' points within `nn` (the sentinels end the
+    /// walks).
+    fn p_at(&self, s: usize, seg: &Seg, k: u64, nn: f64) -> f64 {
         let x = seg.at(k);
         let mut p = 1.0;
         if seg.c >= 2 {
             if seg.is_point() {
-                p += (seg.c - 1) as f64;
+                p += to_f64(seg.c - 1);
             } else {
-                let r = seg.d / nn;
+                let r = seg.r;
                 p += kernel_sum(k.min(seg.w), r) + kernel_sum((seg.c - 1 - k).min(seg.w), r);
             }
         }
-        for t in (0..s).rev() {
-            let (sum, done) = Self::from_run(&self.segs[t], x, nn, true);
+        for run in self.runs[..s + 1].iter().rev() {
+            let (sum, done) = from_run(&run.seg(), x, nn, true);
             p += sum;
             if done {
                 break;
             }
         }
-        for t in s + 1..self.segs.len() {
-            let (sum, done) = Self::from_run(&self.segs[t], x, nn, false);
+        for run in &self.runs[s + 2..] {
+            let (sum, done) = from_run(&run.seg(), x, nn, false);
             p += sum;
             if done {
                 break;
@@ -510,70 +783,42 @@ impl PointSet {
         }
         p
     }
+}
 
-    /// Pilot terms at `x` from the points of another run lying below (`below`) or above it;
-    /// `done` when runs further away cannot contribute.
-    fn from_run(seg: &Seg, x: f64, nn: f64, below: bool) -> (f64, bool) {
-        // Distances from x to the run's near and far ends.
-        let (near, far) = if below {
-            (x - seg.hi, x - seg.lo)
-        } else {
-            (seg.lo - x, seg.hi - x)
-        };
-        if !(near < nn) {
-            return (0.0, true);
-        }
-        if far < nn {
-            // The whole run is inside the window: Σ_j (1 - ((near + j d) / nn)^2) in closed
-            // form, j = 0..c-1.
-            let c = seg.c as f64;
-            let (sj, sj2) = (c * (c - 1.0) / 2.0, (c - 1.0) * c * (2.0 * c - 1.0) / 6.0);
-            let sq = c * near * near + 2.0 * near * seg.d * sj + seg.d * seg.d * sj2;
-            return (c - sq / (nn * nn), false);
-        }
-        // Part of the run: walk from the near end until the window's edge.
-        let mut sum = 0.0;
-        for j in 0..seg.c {
-            let y = if below {
-                seg.at(seg.c - 1 - j)
-            } else {
-                seg.at(j)
-            };
-            let r = (x - y) / nn;
-            if !(r.abs() < 1.0) {
-                break;
-            }
-            sum += 1.0 - r * r;
-        }
-        (sum, true)
+/// Pilot terms at `x` from the points of another run lying below (`below`) or above it;
+/// `done` when runs further away cannot contribute.
+#[inline]
+fn from_run(seg: &Seg, x: f64, nn: f64, below: bool) -> (f64, bool) {
+    // Distances from x to the run's near and far ends.
+    let (near, far) = if below {
+        (x - seg.hi, x - seg.lo)
+    } else {
+        (seg.lo - x, seg.hi - x)
+    };
+    if !(near < nn) {
+        return (0.0, true);
     }
-
-    /// The points of run `s` to test for overlap, nearest to the newcomer first (`from_top`:
-    /// the run lies below it). The interior points all share one bandwidth, so only the
-    /// nearest of them is listed: if it misses, the farther ones miss too.
-    fn order(&self, s: usize, from_top: bool) -> Vec<u64> {
-        let seg = self.segs[s];
-        let (c, w) = (seg.c, seg.w);
-        let ks: Vec<u64> = if seg.is_point() {
-            vec![0]
-        } else if seg.has_interior() {
-            (0..=w).chain([w + 1]).chain(c - 1 - w..c).collect()
-        } else {
-            (0..c).collect()
-        };
-        if from_top {
-            // Mirror: nearest is the top; the interior's nearest is c - 2 - w.
-            if seg.has_interior() {
-                (c - 1 - w..c)
-                    .rev()
-                    .chain([c - 2 - w])
-                    .chain((0..=w).rev())
-                    .collect()
-            } else {
-                ks.into_iter().rev().collect()
-            }
-        } else {
-            ks
-        }
+    if far < nn {
+        // The whole run is inside the window: Σ_j (1 - ((near + j d) / nn)^2) in closed
+        // form, j = 0..c-1.
+        let c = seg.c as f64;
+        let (sj, sj2) = (c * (c - 1.0) / 2.0, (c - 1.0) * c * (2.0 * c - 1.0) / 6.0);
+        let sq = c * near * near + 2.0 * near * seg.d * sj + seg.d * seg.d * sj2;
+        return (c - sq / (nn * nn), false);
     }
+    // Part of the run: walk from the near end until the window's edge.
+    let mut sum = 0.0;
+    for j in 0..seg.c {
+        let y = if below {
+            seg.at(seg.c - 1 - j)
+        } else {
+            seg.at(j)
+        };
+        let r = (x - y) / nn;
+        if !(r.abs() < 1.0) {
+            break;
+        }
+        sum += 1.0 - r * r;
+    }
+    (sum, true)
 }

@@ -1,10 +1,13 @@
 //! Unit tests of the Pajot internals: the runs, the kept list, ROT's overlap search and ADR's
 //! implicit point set, each against a literal computation.
 
+use super::adr::reference::with_reference;
 use super::adr::{Adr, PajotMode, adr_bandwidths};
-use super::for_each_run;
 use super::ledger::Ledger;
 use super::rot::Rot;
+use super::{PajotAdr, PajotHybrid, for_each_run, sorted_with_logs};
+use crate::Estimator;
+use proptest::prelude::*;
 
 /// splitmix64: a deterministic stream for the randomised checks (no RNG crate in this module).
 struct Mix(u64);
@@ -256,10 +259,7 @@ fn adr_implicit_point_set_matches_materialised() {
         if modes.get(i).is_some_and(|m| m.is_extended() && m.lo <= l) {
             continue;
         }
-        let adr = Adr {
-            modes: modes.clone(),
-            ..Adr::NEW
-        };
+        let adr = Adr::with_modes(&modes, f64::NEG_INFINITY);
         // Skip near ties of the literal computation.
         let mut xs: Vec<f64> = modes
             .iter()
@@ -302,11 +302,7 @@ fn adr_merge_absorbs_a_mode_it_does_not_overlap() {
         hi: 7.61,
         count: 2,
     };
-    let mut adr = Adr {
-        modes: vec![dense, wide],
-        m: 7.61,
-        ..Adr::NEW
-    };
+    let mut adr = Adr::with_modes(&[dense, wide], 7.61);
     let l = 0.32;
     assert_eq!(adr.overlapped_naive(l, 0), Some((0, 1)));
     // The newcomer overlaps only the wide mode's point 2.16:
@@ -322,7 +318,7 @@ fn adr_merge_absorbs_a_mode_it_does_not_overlap() {
     assert!(xs[41] - l < h[0] + h[41]);
     assert!(!adr.update(l), "m unchanged");
     assert_eq!(
-        adr.modes,
+        adr.public_modes(),
         vec![PajotMode {
             lo: l,
             hi: 7.61,
@@ -333,36 +329,196 @@ fn adr_merge_absorbs_a_mode_it_does_not_overlap() {
 
 #[test]
 fn adr_update_inside_an_extended_mode_only_counts() {
-    let mut adr = Adr {
-        modes: vec![PajotMode {
+    let mut adr = Adr::with_modes(
+        &[PajotMode {
             lo: 0.0,
             hi: 1.0,
             count: 3,
         }],
-        m: 1.0,
-        ..Adr::NEW
-    };
+        1.0,
+    );
     for l in [0.0, 0.5, 1.0] {
         assert!(!adr.update(l));
     }
     assert_eq!(adr.modes[0].count, 6);
     // Equal to a single: identical values overlap even with h = 0, forming an extended mode.
-    let mut adr = Adr {
-        modes: vec![PajotMode {
+    let mut adr = Adr::with_modes(
+        &[PajotMode {
             lo: 2.0,
             hi: 2.0,
             count: 1,
         }],
-        ..Adr::NEW
-    };
+        f64::NEG_INFINITY,
+    );
     assert!(adr.update(2.0));
     assert_eq!(adr.m, 2.0);
     assert_eq!(
-        adr.modes,
+        adr.public_modes(),
         vec![PajotMode {
             lo: 2.0,
             hi: 2.0,
             count: 2
         }]
     );
+}
+
+/// Heavy-tailed log-luminances with ties: a lognormal body, exact repeats, values one ulp apart,
+/// a Pareto tail, and the extremes `ln 1e-300`, `ln 1e300`.
+fn hard_log(rng: &mut Mix, repeats: &[f64]) -> f64 {
+    let u = |rng: &mut Mix| ((rng.next() >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+    match rng.next() % 16 {
+        0..=6 => {
+            // Box-Muller normal
+            let (a, b) = (u(rng), u(rng));
+            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+        }
+        7..=9 => rng.pick(repeats),
+        10 => f64::from_bits(rng.pick(repeats).to_bits() + 1 + rng.next() % 3),
+        11 | 12 => 3.0 - u(rng).ln() / 1.1,
+        13 => 1e-300f64.ln(),
+        14 => 1e300f64.ln(),
+        _ => rng.uniform(-3.0, 3.0),
+    }
+}
+
+/// ADR's fast overlap search equals the first implicit form bit for bit (no tie is skipped),
+/// on random mode sets and on the modes of heavy-tailed streams.
+#[test]
+fn adr_overlapped_equals_reference() {
+    let mut rng = Mix(5);
+    let mut merged = 0;
+    for _ in 0..60_000 {
+        let modes = random_modes(&mut rng);
+        let options = [
+            rng.uniform(-1.0, 9.0),
+            modes[0].lo,
+            modes[modes.len() - 1].hi,
+            rng.pick(&modes).hi,
+            rng.pick(&modes).lo,
+        ];
+        let l = rng.pick(&options);
+        let i = modes.partition_point(|m| m.hi < l);
+        if modes.get(i).is_some_and(|m| m.is_extended() && m.lo <= l) {
+            continue;
+        }
+        let adr = Adr::with_modes(&modes, f64::NEG_INFINITY);
+        let want = adr.overlapped_ref(l, i);
+        assert_eq!(adr.overlapped(l, i), want, "l = {l}, modes = {modes:?}");
+        merged += usize::from(want.is_some());
+    }
+    assert!(merged > 8_000, "{merged} merged");
+}
+
+/// Whole streams: ADR through the fast search and through the reference end with the same
+/// modes and bound after every sample, on heavy-tailed streams with ties and extremes.
+#[test]
+fn adr_updates_equal_reference_on_hard_streams() {
+    let mut rng = Mix(17);
+    let mut calls = 0u64;
+    for round in 0..400 {
+        let repeats: Vec<f64> = (0..4).map(|_| hard_log(&mut rng, &[0.0])).collect();
+        let learn = rng.next() % 60;
+        let n = 50 + rng.next() % 700;
+        let mut logs: Vec<f64> = (0..n).map(|_| hard_log(&mut rng, &repeats)).collect();
+        if round % 4 == 0 {
+            // Scale like a far-off pixel: the same decisions up to rounding, new roundings.
+            let (a, b) = (rng.uniform(0.01, 40.0), rng.uniform(-300.0, 300.0));
+            logs.iter_mut().for_each(|l| *l = a * *l + b);
+        }
+        let (learning, rest) = logs.split_at(learn.min(n) as usize);
+        let mut sorted = learning.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let (mut fast, mut slow) = (Adr::NEW, Adr::NEW);
+        assert_eq!(fast.learn_end(&sorted), slow.learn_end(&sorted));
+        for &l in rest {
+            let before = fast.modes.len();
+            assert_eq!(fast.update(l), slow.update_ref(l));
+            assert_eq!(
+                fast.public_modes(),
+                slow.public_modes(),
+                "round {round}, l = {l}"
+            );
+            assert_eq!(fast.m.to_bits(), slow.m.to_bits());
+            calls += u64::from(fast.modes.len() != before);
+        }
+    }
+    assert!(calls > 4_000, "{calls} searches changed the modes");
+}
+
+/// Heavy-tailed samples with ties: a lognormal body, a Pareto tail, black samples, repeated
+/// values and their neighbours one ulp away, and the extremes 1e-300 and 1e300.
+fn hard_samples(max_len: usize) -> impl Strategy<Value = Vec<f64>> {
+    let tie = 2f64;
+    prop::collection::vec(
+        prop_oneof![
+            8 => (0.0f64..1.0, 0.0f64..1.0, 0.0f64..1.0)
+                .prop_map(|(a, b, c)| (2.0 * (a + b + c) - 3.0).exp()),
+            2 => (0.0f64..1.0).prop_map(|u| 1e3 * (1.0 - u).powf(-1.0 / 1.1)),
+            2 => Just(0.0),
+            2 => prop::sample::select(vec![0.5, tie, 7.25]),
+            1 => prop::sample::select(vec![
+                f64::from_bits(tie.to_bits() + 1),
+                f64::from_bits(tie.to_bits() - 1),
+            ]),
+            1 => prop::sample::select(vec![1e-300, 1e300, f64::MIN_POSITIVE, 1.0]),
+        ],
+        0..max_len,
+    )
+}
+
+/// Pushes `stream` into `fast` and, through the first implementation of ADR's update, into
+/// `slow` (built alike); after every sample the two agree bit for bit on everything they
+/// report.
+fn check_same(mut fast: Box<dyn Estimator>, mut slow: Box<dyn Estimator>, stream: &[f64]) {
+    let bits = |e: &dyn Estimator| e.estimate().ok().map(f64::to_bits);
+    for (j, &s) in stream.iter().enumerate() {
+        fast.push(s);
+        with_reference(|| slow.push(s));
+        assert_eq!(
+            bits(&*fast),
+            bits(&*slow),
+            "{fast} estimate at {j}: {stream:?}"
+        );
+        assert_eq!(
+            format!("{:?}", fast.extras()),
+            format!("{:?}", slow.extras()),
+            "{fast} extras at {j}: {stream:?}"
+        );
+        assert_eq!(fast.state_bytes(), slow.state_bytes(), "{fast} at {j}");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// ADR and the hybrid with the faster search report exactly what they did with the first
+    /// one, on heavy-tailed streams (ties, black samples, extremes), with and without a cap.
+    #[test]
+    fn estimators_equal_first_implementation(stream in hard_samples(700), learn in 0usize..60,
+                                             t in 1usize..4, cap in 0usize..6) {
+        let adr = || PajotAdr::new(learn).unwrap();
+        check_same(Box::new(adr()), Box::new(adr()), &stream);
+        check_same(
+            Box::new(adr().with_max_delayed(cap)),
+            Box::new(adr().with_max_delayed(cap)),
+            &stream,
+        );
+        let hybrid = || PajotHybrid::new(learn, t, 0.0).unwrap();
+        check_same(Box::new(hybrid()), Box::new(hybrid()), &stream);
+        let hybrid = || PajotHybrid::new(learn, t, 0.05).unwrap().with_max_delayed(cap);
+        check_same(Box::new(hybrid()), Box::new(hybrid()), &stream);
+    }
+
+    /// The learning phase's sorting: the logs of the sorted samples are the sorted logs.
+    #[test]
+    fn sorted_logs_equal_logs_sorted(stream in hard_samples(80)) {
+        let values: Vec<f64> = stream.into_iter().filter(|&s| s > 0.0).collect();
+        let mut logs: Vec<f64> = values.iter().map(|s| s.ln()).collect();
+        logs.sort_by(f64::total_cmp);
+        let (_, got) = sorted_with_logs(values, None);
+        prop_assert_eq!(
+            got.iter().map(|l| l.to_bits()).collect::<Vec<_>>(),
+            logs.iter().map(|l| l.to_bits()).collect::<Vec<_>>()
+        );
+    }
 }
