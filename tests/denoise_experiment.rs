@@ -46,6 +46,10 @@ fn the_experiment_file_parses_full_and_quick() {
     assert!(matches!(full.sources[1].color, ColorSource::Estimator(_)));
     assert_eq!(full.mse_check.seeds, 16);
     assert_eq!(full.mse_check.spp, 16);
+    assert_eq!(
+        full.mse_check.variances,
+        [VarianceSource::Sample, VarianceSource::Halves]
+    );
 
     let quick = DenoiseExperiment::load(path, true).unwrap();
     for (q, f) in quick.scenes.iter().zip(&full.scenes) {
@@ -99,8 +103,8 @@ fn bad_input_names_the_entry() {
         &["spp[0] = 2", "at least 4"],
     );
     fails_naming(
-        "spp = [4, 16]",
-        "spp = [1, 16]",
+        "rfilter = \"box\"\nspp = [4, 16]",
+        "rfilter = \"box\"\nspp = [1, 16]",
         &[r#"scenes[4] ("living-room").spp[0] = 1"#, "NFOR"],
     );
     fails_naming(
@@ -120,8 +124,8 @@ fn bad_input_names_the_entry() {
     );
     fails_naming(
         "montage_spp = 16",
-        "montage_spp = 8",
-        &["montage_spp = 8", "living-room"],
+        "montage_spp = 64",
+        &["montage_spp = 64", "living-room"],
     );
     fails_naming(
         r#"rfilter = "box""#,
@@ -164,24 +168,24 @@ fn a_quick_cbox_run_writes_its_report_and_nfor_helps_the_mean() {
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{log}");
     let csv = std::fs::read_to_string(out.join("denoise.csv")).unwrap();
-    let mut lines = csv.lines();
-    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
-    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let mut reader = csv::Reader::from_reader(csv.as_bytes());
+    let head = reader.headers().unwrap().clone();
+    let col = |name: &str| head.iter().position(|h| h == name).unwrap();
+    let rows: Vec<csv::StringRecord> = reader.records().map(Result::unwrap).collect();
     // 16 spp: three noisy rows, and NFOR for mean (halves, sample), G-MoN and Zirr (halves).
     assert_eq!(rows.len(), 3 + 4, "{csv}");
     let relmse = |source: &str, variance: &str| -> f64 {
         rows.iter()
-            .find(|r| r[col("source")] == source && r[col("variance")] == variance)
+            .find(|r| &r[col("source")] == source && &r[col("variance")] == variance)
             .unwrap_or_else(|| panic!("{source} {variance}"))[col("relmse")]
         .parse()
         .unwrap()
     };
     for r in &rows {
-        assert_eq!(r[col("scene")], "cbox");
-        assert_eq!(r[col("spp")], "16");
-        assert_eq!((r[col("width")], r[col("height")]), ("64", "64"));
-        let denoised = r[col("stage")] == "denoised";
+        assert_eq!(&r[col("scene")], "cbox");
+        assert_eq!(&r[col("spp")], "16");
+        assert_eq!((&r[col("width")], &r[col("height")]), ("64", "64"));
+        let denoised = &r[col("stage")] == "denoised";
         assert_eq!(r[col("variance")].is_empty(), !denoised);
         assert_eq!(!r[col("nfor_s")].is_empty(), denoised);
     }
@@ -193,8 +197,8 @@ fn a_quick_cbox_run_writes_its_report_and_nfor_helps_the_mean() {
     assert!(nfor * 2.0 <= noisy, "noisy {noisy}, NFOR {nfor}");
 
     let mse = std::fs::read_to_string(out.join("mse_check.csv")).unwrap();
-    // One interval per bandwidth (0.5 and 1) over the two seeds.
-    assert_eq!(mse.lines().count(), 1 + 2, "{mse}");
+    // One interval per variance (sample, halves) and bandwidth (0.5, 1) over the two seeds.
+    assert_eq!(mse.lines().count(), 1 + 4, "{mse}");
     for f in [
         "mse_estimates.csv",
         "scenes.csv",

@@ -20,6 +20,7 @@
 //! scene = "cbox"
 //! spp = 16
 //! seeds = 16
+//! variance = ["sample", "halves"]
 //!
 //! [quick]
 //! resolution = 0.25
@@ -70,16 +71,16 @@ pub struct MseCheckEntry {
     /// The source denoised (one of `sources`; default the mean).
     #[serde(default = "default_mean")]
     pub estimator: String,
-    /// Its variance (default `sample`).
+    /// Its variances, each checked on the same renders (default `["sample"]`).
     #[serde(default = "default_sample")]
-    pub variance: String,
+    pub variance: Vec<String>,
 }
 
 fn default_mean() -> String {
     "mean".into()
 }
-fn default_sample() -> String {
-    "sample".into()
+fn default_sample() -> Vec<String> {
+    vec!["sample".into()]
 }
 fn default_factor() -> f64 {
     FireflyRule::DEFAULT_FACTOR
@@ -187,8 +188,8 @@ pub struct MseCheck {
     pub seeds: u32,
     /// Index into the sources.
     pub source: usize,
-    /// The variance.
-    pub variance: VarianceSource,
+    /// The variances, each an NFOR run on every render.
+    pub variances: Vec<VarianceSource>,
 }
 
 /// A checked denoising experiment.
@@ -486,18 +487,32 @@ impl DenoiseExperiment {
             .iter()
             .position(|s| s.spec == spec)
             .ok_or_else(|| (entry, "is not one of `sources`".to_string()))?;
-        let variance = parse_variance(&m.variance).ok_or_else(|| {
-            (
-                format!("mse_check.variance = \"{}\"", shorten(&m.variance)),
-                "must be \"sample\" or \"halves\"".to_string(),
-            )
-        })?;
+        if m.variance.is_empty() {
+            return Err((
+                "mse_check.variance = []".into(),
+                "give \"sample\", \"halves\" or both".into(),
+            ));
+        }
+        let mut variances = Vec::new();
+        for (j, v) in m.variance.iter().enumerate() {
+            let entry = format!("mse_check.variance[{j}] = \"{}\"", shorten(v));
+            let parsed = parse_variance(v).ok_or_else(|| {
+                (
+                    entry.clone(),
+                    "must be \"sample\" or \"halves\"".to_string(),
+                )
+            })?;
+            if variances.contains(&parsed) {
+                return Err((entry, "is listed twice".into()));
+            }
+            variances.push(parsed);
+        }
         let mse_check = MseCheck {
             scene,
             spp,
             seeds,
             source,
-            variance,
+            variances,
         };
         Ok(DenoiseExperiment {
             source: String::new(),
@@ -513,6 +528,6 @@ impl DenoiseExperiment {
 
     /// The estimators every render runs: each source's, in file order.
     pub fn estimators(&self) -> Vec<EstimatorSpec> {
-        self.sources.iter().map(|s| s.spec.clone()).collect()
+        self.sources.iter().map(|s| s.spec).collect()
     }
 }

@@ -248,25 +248,26 @@ fn render(
     Ok((out, buffers, wall))
 }
 
-fn mse_rows(
-    study: &str,
-    scene: &str,
+/// Which NFOR run a set of [`MseRow`]s comes from.
+struct RunKey<'a> {
+    study: &'a str,
+    scene: &'a str,
     spp: u32,
-    source: &str,
+    source: String,
     variance: VarianceSource,
     seed: u64,
-    run: &NforRun,
-    reference_variance: f64,
-) -> Vec<MseRow> {
+}
+
+fn mse_rows(key: &RunKey, run: &NforRun, reference_variance: f64) -> Vec<MseRow> {
     run.mse
         .iter()
         .map(|&(k, est, truth)| MseRow {
-            study: study.into(),
-            scene: scene.into(),
-            spp,
-            source: source.into(),
-            variance: variance_name(variance).into(),
-            seed,
+            study: key.study.into(),
+            scene: key.scene.into(),
+            spp: key.spp,
+            source: key.source.clone(),
+            variance: variance_name(key.variance).into(),
+            seed: key.seed,
             k,
             estimated_mse: est,
             true_mse: truth,
@@ -384,16 +385,15 @@ pub fn run_denoise_scene(
                 r.second_pass_s = Some(run.stages.second_pass);
                 r.nfor_peak_rss_bytes = run.peak_rss;
                 r.nfor_peak_rss_reset = Some(run.peak_reset);
-                mse.extend(mse_rows(
-                    "grid",
-                    &scene.name,
+                let key = RunKey {
+                    study: "grid",
+                    scene: &scene.name,
                     spp,
-                    &source.spec.to_string(),
-                    v,
-                    exp.file.seed,
-                    &run,
-                    reference_variance,
-                ));
+                    source: source.spec.to_string(),
+                    variance: v,
+                    seed: exp.file.seed,
+                };
+                mse.extend(mse_rows(&key, &run, reference_variance));
                 rows.push(r);
                 if at_montage {
                     montage.push((
@@ -412,27 +412,29 @@ pub fn run_denoise_scene(
             let seed = exp.file.seed.wrapping_add(s);
             let (_, buffers, wall) = render(exp, &world, c.spp, seed, memory)?;
             render_wall += wall;
-            let run = denoise(&buffers, &source.color, c.variance, &params, &ref_image)?;
-            nfor_wall += run.seconds;
-            let rows = mse_rows(
-                "seeds",
-                &scene.name,
-                c.spp,
-                &source.spec.to_string(),
-                c.variance,
-                seed,
-                &run,
-                reference_variance,
-            );
-            log(format!(
-                "{}: MSE check, seed {seed}: estimated / true = {}",
-                scene.name,
-                rows.iter()
-                    .map(|r| format!("{:.3} (k = {})", r.ratio, r.k))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ));
-            mse.extend(rows);
+            for &v in &c.variances {
+                let run = denoise(&buffers, &source.color, v, &params, &ref_image)?;
+                nfor_wall += run.seconds;
+                let key = RunKey {
+                    study: "seeds",
+                    scene: &scene.name,
+                    spp: c.spp,
+                    source: source.spec.to_string(),
+                    variance: v,
+                    seed,
+                };
+                let rows = mse_rows(&key, &run, reference_variance);
+                log(format!(
+                    "{}: MSE check, seed {seed}, {} variance: estimated / true = {}",
+                    scene.name,
+                    variance_name(v),
+                    rows.iter()
+                        .map(|r| format!("{:.3} (k = {})", r.ratio, r.k))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+                mse.extend(rows);
+            }
         }
     }
 
