@@ -201,8 +201,9 @@ fn montage(
         &[
             "Per scene, the window holding the most firefly pixels of the noisy mean (luminance \
              above the rule's factor times the reference's plus its floor), for the reference, \
-             each source's noisy estimate and NFOR's output per variance; exposure 1, clamped, \
-             sRGB curve, nearest-neighbour enlargement."
+             then each source's noisy estimate followed by NFOR's output on its halves with each \
+             variance (\"+ NFOR\"); exposure 1, clamped, sRGB curve, nearest-neighbour \
+             enlargement."
                 .into(),
         ],
         &rows,

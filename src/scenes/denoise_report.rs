@@ -479,7 +479,7 @@ fn summary_md(
 
     s.push_str("## Scenes, references and time\n\n");
     s.push_str(
-        "| scene | size | spp | reference spp | its relMSE floor | reference traced now, s | renders wall s | NFOR runs | NFOR wall s, median per run at the largest spp | s/MP (median over all runs) | stages: prefilter / regression / selection / second pass (s, summed) | NFOR peak RSS, MB (max) |\n\
+        "| scene | size | spp | reference spp | its relMSE floor | reference traced now, s | renders wall s (MSE check's included) | NFOR runs (grid) | NFOR wall s, median per run at the largest spp | s/MP (median over all runs) | stages: prefilter / regression / selection / second pass (s, summed) | NFOR peak RSS, MB (max) |\n\
          |---|---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|\n",
     );
     for info in infos {

@@ -357,7 +357,7 @@ pub fn run_denoise_scene(
             rows.push(row(source, "", NOISY, &m));
             let at_montage = spp == exp.montage_spp;
             if at_montage {
-                montage.push((format!("{}, noisy", source.label), noisy.clone()));
+                montage.push((source.label.clone(), noisy.clone()));
                 if source.color == ColorSource::Mean || crop_probe.is_none() {
                     crop_probe = Some(noisy.clone());
                 }
@@ -396,10 +396,7 @@ pub fn run_denoise_scene(
                 mse.extend(mse_rows(&key, &run, reference_variance));
                 rows.push(r);
                 if at_montage {
-                    montage.push((
-                        format!("{}, NFOR ({} var.)", source.label, variance_name(v)),
-                        run.image,
-                    ));
+                    montage.push((format!("+ NFOR, {} var.", variance_name(v)), run.image));
                 }
             }
         }
