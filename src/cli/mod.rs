@@ -2,6 +2,7 @@
 
 mod compare;
 mod denoise;
+mod denoise_experiment;
 mod eval;
 mod fit;
 mod gate;
@@ -52,6 +53,8 @@ enum Command {
     Scenes(scenes::ScenesArgs),
     /// Denoise a `render --nfor` directory with NFOR (Bitterli et al. 2016).
     Denoise(denoise::DenoiseArgs),
+    /// NFOR behind the mean and robust estimators on every scene, against references.
+    DenoiseExperiment(denoise_experiment::DenoiseExperimentArgs),
     /// Do synthetic results transfer to scenes? Harness predictions on fitted pixels vs renders.
     Transfer(transfer::TransferArgs),
 }
@@ -71,6 +74,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Some(Command::Scenes(args)) => scenes::run(&args, memory),
         Some(Command::Transfer(args)) => transfer::run(&args, memory),
         Some(Command::Denoise(args)) => denoise::run(&args),
+        Some(Command::DenoiseExperiment(args)) => denoise_experiment::run(&args, memory),
         None => run::run(&run::RunArgs::default(), memory),
     }
 }

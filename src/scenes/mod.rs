@@ -6,11 +6,17 @@
 //! [`experiment`] reads the TOML schema, [`run`] does one scene (reference, render, metrics,
 //! costs, delayed fractions), [`cost`] measures what estimators cost next to tracing,
 //! [`tables`] turns rows into tables and [`plots`] into figures; [`report`] writes them.
-//! [`nfor_input`] turns a render's half buffers into NFOR's input.
+//! [`nfor_input`] turns a render's half buffers into NFOR's input; the denoising experiment
+//! (`fireflies denoise-experiment`) is [`denoise_experiment`] (schema), [`denoise_run`] (one
+//! scene), [`denoise_report`] (its tables) and [`denoise_plots`] (its figures).
 //! [`transfer`] is the loop between real pixels and the synthetic harness (`fireflies
 //! transfer`), [`transfer_report`] writes its report.
 
 pub mod cost;
+pub mod denoise_experiment;
+pub mod denoise_plots;
+pub mod denoise_report;
+pub mod denoise_run;
 pub mod experiment;
 pub mod nfor_input;
 pub mod plots;

@@ -342,13 +342,13 @@ pub fn diverging(t: f64) -> [u8; 3] {
 }
 
 /// The display colour of a linear pixel (clamped, sRGB curve), as the PNG previews show it.
-fn display(p: [f32; 3]) -> [u8; 3] {
+pub(crate) fn display(p: [f32; 3]) -> [u8; 3] {
     p.map(|c| (tone_map(f64::from(c)) * 255.0).round() as u8)
 }
 
 /// A tile: a caption over an image given as a function of its pixels, scaled by nearest
 /// neighbour.
-struct Tile {
+pub(crate) struct Tile {
     caption: String,
     width: usize,
     height: usize,
@@ -356,7 +356,7 @@ struct Tile {
 }
 
 impl Tile {
-    fn from_image(
+    pub(crate) fn from_image(
         caption: String,
         img: &Image,
         window: [u32; 3],
@@ -385,7 +385,7 @@ const TOP: i32 = 16;
 
 /// A grid of tiles with a title, note lines, optional row labels and an optional colour bar
 /// `(lo, hi, label)` of the diverging map; returns PNG bytes.
-fn draw_tiles(
+pub(crate) fn draw_tiles(
     title: &str,
     notes: &[String],
     rows: &[(String, Vec<Tile>)],

@@ -264,7 +264,7 @@ pub fn firefly_window(
 }
 
 /// The automatic crop size: a third of the shorter side, between 12 and 48 pixels.
-fn crop_size(width: u32, height: u32) -> usize {
+pub(crate) fn crop_size(width: u32, height: u32) -> usize {
     let side = width.min(height) as usize;
     (side / 3).clamp(12, 48).min(side)
 }
