@@ -27,6 +27,15 @@ pub fn threads(requested: Option<usize>) -> Result<usize> {
     }
 }
 
+/// A rayon pool of `threads` workers (0: one per core), as every command that parallelises
+/// builds it; its error names the parameter.
+pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| Error::param("threads", threads, e.to_string()))
+}
+
 /// The most memory a run or render may plan to hold, in bytes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct MemoryLimit(pub u64);

@@ -54,10 +54,7 @@ pub fn run(args: &DenoiseArgs) -> Result<ExitCode> {
     drop(buffers);
     let load_s = start.elapsed().as_secs_f64();
     let params = NforParams::paper();
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::param("threads", threads, e.to_string()))?;
+    let pool = limits::thread_pool(threads)?;
     let threads = pool.current_num_threads();
     let t = Instant::now();
     let out = pool.install(|| nfor(&input, &params))?;

@@ -5,8 +5,9 @@
 
 use clap::Args;
 use fireflies::limits::{self, MemoryLimit};
+use fireflies::scenes::RunInfo;
 use fireflies::scenes::denoise_experiment::DenoiseExperiment;
-use fireflies::scenes::denoise_report::{RunInfo, write_denoise_report};
+use fireflies::scenes::denoise_report::write_denoise_report;
 use fireflies::scenes::denoise_run::run_denoise_scene;
 use fireflies::{Error, Result};
 use std::path::PathBuf;
@@ -41,10 +42,7 @@ pub fn run(args: &DenoiseExperimentArgs, memory: MemoryLimit) -> Result<ExitCode
         .clone()
         .unwrap_or_else(|| args.out.join("references"));
     std::fs::create_dir_all(&args.out).map_err(|e| Error::io(args.out.display(), &e))?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::param("threads", threads, e.to_string()))?;
+    let pool = limits::thread_pool(threads)?;
     let mut log = |line: String| eprintln!("[{:7.1} s] {line}", started.elapsed().as_secs_f64());
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let mut results = Vec::new();

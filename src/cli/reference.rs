@@ -196,10 +196,7 @@ pub fn run(args: &ReferenceArgs, memory: MemoryLimit) -> Result<ExitCode> {
     // Fail on an unwritable output before spending the render.
     check_writable(&args.out)?;
 
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::param("threads", threads, e.to_string()))?;
+    let pool = limits::thread_pool(threads)?;
     let bar = if std::io::stderr().is_terminal() {
         let bar = ProgressBar::new(args.spp);
         bar.set_style(

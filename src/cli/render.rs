@@ -146,10 +146,7 @@ pub fn run(args: &RenderArgs, memory: MemoryLimit) -> Result<ExitCode> {
     };
     // Fail on an unwritable output before spending the render.
     std::fs::create_dir_all(&args.out).map_err(|e| Error::io(args.out.display(), &e))?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::param("threads", threads, e.to_string()))?;
+    let pool = limits::thread_pool(threads)?;
     let bar = if std::io::stderr().is_terminal() {
         let bar = ProgressBar::new(u64::from(cfg.spp));
         bar.set_style(

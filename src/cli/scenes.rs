@@ -61,10 +61,7 @@ pub fn run(args: &ScenesArgs, memory: MemoryLimit) -> Result<ExitCode> {
         .clone()
         .unwrap_or_else(|| args.out.join("references"));
     std::fs::create_dir_all(&args.out).map_err(|e| Error::io(args.out.display(), &e))?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::param("threads", threads, e.to_string()))?;
+    let pool = limits::thread_pool(threads)?;
     let mut log = |line: String| eprintln!("[{:7.1} s] {line}", started.elapsed().as_secs_f64());
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let mut results = Vec::new();

@@ -37,10 +37,7 @@ pub fn run(args: &TransferArgs, memory: MemoryLimit) -> Result<ExitCode> {
         exp = exp.with_fit_spp(n)?;
     }
     std::fs::create_dir_all(&args.out).map_err(|e| Error::io(args.out.display(), &e))?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::param("threads", threads, e.to_string()))?;
+    let pool = limits::thread_pool(threads)?;
     let log = |line: String| eprintln!("[{:7.1} s] {line}", started.elapsed().as_secs_f64());
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let mut results = Vec::new();

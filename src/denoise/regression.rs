@@ -77,6 +77,14 @@ pub fn collaborative_regression(
     for &k in bandwidths {
         NlMeansParams::new(params.patch_radius, params.window_radius, k)?;
     }
+    let problem = Problem {
+        image,
+        guide,
+        guide_var,
+        features,
+        params,
+        bandwidths,
+    };
     let (w, h) = (image.width(), image.height());
     let mut acc = vec![Planes::zeros(w, h, 3); bandwidths.len()];
     let mut wsum = vec![vec![0.0f32; w * h]; bandwidths.len()];
@@ -86,9 +94,7 @@ pub fn collaborative_regression(
     for band in all.chunk_by(|a, b| a.y0 == b.y0) {
         let sums: Vec<Vec<TileSum>> = band
             .par_iter()
-            .map_init(Workspace::default, |ws, &rect| {
-                ws.tile(image, guide, guide_var, features, params, bandwidths, rect)
-            })
+            .map_init(Workspace::default, |ws, &rect| ws.tile(&problem, rect))
             .collect();
         for per_k in sums {
             for ((s, acc), wsum) in per_k.into_iter().zip(&mut acc).zip(&mut wsum) {
@@ -144,18 +150,26 @@ struct Workspace {
     used: usize,
 }
 
+/// The inputs of one [`collaborative_regression`], checked.
+struct Problem<'a> {
+    image: &'a Planes,
+    guide: &'a Planes,
+    guide_var: &'a Planes,
+    features: &'a Planes,
+    params: NlMeansParams,
+    bandwidths: &'a [f32],
+}
+
 impl Workspace {
-    #[allow(clippy::too_many_arguments)]
-    fn tile(
-        &mut self,
-        image: &Planes,
-        guide: &Planes,
-        guide_var: &Planes,
-        features: &Planes,
-        params: NlMeansParams,
-        bandwidths: &[f32],
-        rect: Rect,
-    ) -> Vec<TileSum> {
+    fn tile(&mut self, problem: &Problem<'_>, rect: Rect) -> Vec<TileSum> {
+        let Problem {
+            image,
+            guide,
+            guide_var,
+            features,
+            params,
+            bandwidths,
+        } = *problem;
         let (w, h) = (image.width(), image.height());
         let r = params.window_radius;
         let side = 2 * r + 1;

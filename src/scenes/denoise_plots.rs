@@ -5,7 +5,7 @@
 
 use super::denoise_experiment::{DenoiseExperiment, variance_name};
 use super::denoise_run::{DenoiseRow, DenoiseSceneResult};
-use super::plots::{Tile, display, draw_tiles};
+use super::plots::{Tile, crop_row, draw_tiles};
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
 use crate::report::plots::{
@@ -184,16 +184,8 @@ fn montage(
     let rows: Vec<(String, Vec<Tile>)> = results
         .iter()
         .map(|r| {
-            let mut tiles = vec![Tile::from_image(
-                "reference".into(),
-                &r.reference,
-                r.crop,
-                display,
-            )];
-            for (label, img) in &r.montage {
-                tiles.push(Tile::from_image(label.clone(), img, r.crop, display));
-            }
-            (format!("{} ({} spp)", r.info.scene, exp.montage_spp), tiles)
+            let label = format!("{} ({} spp)", r.info.scene, exp.montage_spp);
+            crop_row(label, &r.reference, r.crop, &r.montage)
         })
         .collect();
     let png = draw_tiles(

@@ -6,6 +6,7 @@
 
 use super::denoise_experiment::{DenoiseExperiment, variance_name};
 use super::denoise_run::{DENOISED, DenoiseRow, DenoiseSceneInfo, DenoiseSceneResult, MseRow};
+use super::report::{RunInfo, summary_head};
 use super::tables::to_csv;
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
@@ -14,19 +15,6 @@ use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, StudentsT};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-
-/// How the run went, for the summary and the manifest.
-#[derive(Debug, Clone)]
-pub struct RunInfo {
-    /// The command line, as run.
-    pub command: String,
-    /// Wall seconds so far.
-    pub wall_s: f64,
-    /// Worker threads.
-    pub threads: usize,
-    /// Scenes not run yet (the report is rewritten after every scene).
-    pub pending: Vec<String>,
-}
 
 /// NFOR's MSE estimate over seeds for one bandwidth: the ratio of the image-mean estimate to
 /// the image-mean true squared error, with a Student-t interval over the seeds.
@@ -226,25 +214,13 @@ fn summary_md(
     intervals: &[MseInterval],
 ) -> String {
     let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "# Denoising experiment: NFOR behind robust estimators{}\n",
-        if exp.quick {
-            " — QUICK RUN (scaled down by `--quick`; not the experiment's numbers)"
-        } else {
-            ""
-        }
+    summary_head(
+        &mut s,
+        "Denoising experiment: NFOR behind robust estimators",
+        exp.quick,
+        &run.pending,
+        &exp.file.description,
     );
-    if !run.pending.is_empty() {
-        let _ = writeln!(
-            s,
-            "**Partial report**: the run has not done {} yet.\n",
-            run.pending.join(", ")
-        );
-    }
-    if !exp.file.description.is_empty() {
-        let _ = writeln!(s, "{}\n", exp.file.description.trim());
-    }
     let _ = writeln!(
         s,
         "`{}` — {:.0} s wall on {} threads; commit {}. Per scene and sample count, one render \

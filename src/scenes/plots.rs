@@ -342,7 +342,7 @@ pub fn diverging(t: f64) -> [u8; 3] {
 }
 
 /// The display colour of a linear pixel (clamped, sRGB curve), as the PNG previews show it.
-pub(crate) fn display(p: [f32; 3]) -> [u8; 3] {
+fn display(p: [f32; 3]) -> [u8; 3] {
     p.map(|c| (tone_map(f64::from(c)) * 255.0).round() as u8)
 }
 
@@ -356,7 +356,7 @@ pub(crate) struct Tile {
 }
 
 impl Tile {
-    pub(crate) fn from_image(
+    fn from_image(
         caption: String,
         img: &Image,
         window: [u32; 3],
@@ -655,6 +655,28 @@ fn bias_maps(dir: &Path, r: &SceneResult, tag: &str) -> Result<PathBuf> {
     Ok(path)
 }
 
+/// One row of a crop figure: the reference's window, then each labelled image's.
+pub(crate) fn crop_row(
+    label: String,
+    reference: &Image,
+    crop: [u32; 3],
+    images: &[(String, Image)],
+) -> (String, Vec<Tile>) {
+    let tiles = std::iter::once(Tile::from_image(
+        "reference".into(),
+        reference,
+        crop,
+        display,
+    ))
+    .chain(
+        images
+            .iter()
+            .map(|(caption, img)| Tile::from_image(caption.clone(), img, crop, display)),
+    )
+    .collect();
+    (label, tiles)
+}
+
 /// `crops.png`: per scene, the firefly crop of the reference and of each crop estimator at
 /// the crops' spp, tone-mapped as the previews are.
 fn crops(dir: &Path, results: &[SceneResult], tag: &str) -> Result<PathBuf> {
@@ -663,16 +685,8 @@ fn crops(dir: &Path, results: &[SceneResult], tag: &str) -> Result<PathBuf> {
     let rows: Vec<(String, Vec<Tile>)> = results
         .iter()
         .map(|r| {
-            let mut tiles = vec![Tile::from_image(
-                "reference".into(),
-                &r.reference,
-                r.crop,
-                display,
-            )];
-            for (label, img) in &r.crop_images {
-                tiles.push(Tile::from_image(label.clone(), img, r.crop, display));
-            }
-            (format!("{} ({} spp)", r.info.scene, r.crop_spp), tiles)
+            let label = format!("{} ({} spp)", r.info.scene, r.crop_spp);
+            crop_row(label, &r.reference, r.crop, &r.crop_images)
         })
         .collect();
     let png = draw_tiles(

@@ -24,6 +24,33 @@ pub struct RunInfo {
     pub pending: Vec<String>,
 }
 
+/// The opening of a summary: its title (marked when the run is quick), which scenes are still
+/// pending, and the experiment's description.
+pub(crate) fn summary_head(
+    s: &mut String,
+    title: &str,
+    quick: bool,
+    pending: &[String],
+    description: &str,
+) {
+    let quick = if quick {
+        " — QUICK RUN (scaled down by `--quick`; not the experiment's numbers)"
+    } else {
+        ""
+    };
+    let _ = writeln!(s, "# {title}{quick}\n");
+    if !pending.is_empty() {
+        let _ = writeln!(
+            s,
+            "**Partial report**: the run has not done {} yet.\n",
+            pending.join(", ")
+        );
+    }
+    if !description.is_empty() {
+        let _ = writeln!(s, "{}\n", description.trim());
+    }
+}
+
 /// Writes every table and figure of `results` into `dir`; returns the paths written.
 ///
 /// # Errors
@@ -136,25 +163,13 @@ fn summary_md(
     let mut s = String::new();
     let scenes = scene_names(infos);
     let ests = estimator_order(rows);
-    let _ = writeln!(
-        s,
-        "# Scene experiment{}\n",
-        if exp.quick {
-            " — QUICK RUN (scaled down by `--quick`; not the experiment's numbers)"
-        } else {
-            ""
-        }
+    summary_head(
+        &mut s,
+        "Scene experiment",
+        exp.quick,
+        &run.pending,
+        &exp.file.description,
     );
-    if !run.pending.is_empty() {
-        let _ = writeln!(
-            s,
-            "**Partial report**: the run has not done {} yet.\n",
-            run.pending.join(", ")
-        );
-    }
-    if !exp.file.description.is_empty() {
-        let _ = writeln!(s, "{}\n", exp.file.description.trim());
-    }
     let traced_now: f64 = infos.iter().map(|i| i.reference_wall_s).sum();
     let traced_ever: Option<f64> = infos.iter().map(|i| i.reference_total_wall_s).sum();
     let from_scratch = match traced_ever {
