@@ -6,6 +6,10 @@
 //! does), with `reset` between pixels and one `estimate` per pixel. Throughput is in samples,
 //! so criterion's "elem/s" reads as samples per second; ns/sample is its inverse.
 //!
+//! The last function prints a table of ns/sample and ratios (ROT/mean, ADR/mean), from the
+//! fastest of a few timed passes over the same data: the figures the README quotes, read in
+//! one run; criterion's estimates above remain the reference.
+//!
 //! Run: `cargo bench --bench pajot -- --warm-up-time 1 --measurement-time 3`.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
@@ -15,6 +19,7 @@ use fireflies::estimators::{Mean, PajotAdr, PajotHybrid, PajotRot};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::hint::black_box;
+use std::time::Instant;
 
 /// Pixels per iteration.
 const PIXELS: usize = 32;
@@ -85,5 +90,47 @@ fn sweep(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, presets, sweep);
+/// ns/sample of every method on every configuration above, and the ratios to the mean.
+fn summary(_: &mut Criterion) {
+    const PASSES: usize = 7;
+    println!(
+        "\nns/sample, fastest of {PASSES} passes  {:>7} {:>7} {:>7} {:>7}  {:>8} {:>8}",
+        "mean", "rot", "adr", "hybrid", "rot/mean", "adr/mean"
+    );
+    let configs = [
+        (Preset::Caustic, 1024),
+        (Preset::Firefly, 1024),
+        (Preset::Diffuse, 1024),
+        (Preset::Firefly, 256),
+        (Preset::Firefly, 4096),
+    ];
+    for (preset, spp) in configs {
+        let data = samples(preset, spp);
+        let ns: Vec<f64> = METHODS
+            .iter()
+            .map(|(_, make)| {
+                let mut e = make();
+                (0..PASSES)
+                    .map(|_| {
+                        let t = Instant::now();
+                        black_box(run(e.as_mut(), &data, spp));
+                        t.elapsed().as_secs_f64() * 1e9 / data.len() as f64
+                    })
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .collect();
+        println!(
+            "{:<32} {:>7.2} {:>7.2} {:>7.2} {:>7.2}  {:>8.1} {:>8.1}",
+            format!("{}/{spp}", preset.name()),
+            ns[0],
+            ns[1],
+            ns[2],
+            ns[3],
+            ns[1] / ns[0],
+            ns[2] / ns[0]
+        );
+    }
+}
+
+criterion_group!(benches, presets, sweep, summary);
 criterion_main!(benches);

@@ -116,64 +116,6 @@ fn pilot(xs: &[f64], p: &mut Vec<f64>) -> Option<Pilot> {
     Some(Pilot { nn, g })
 }
 
-/// A run of an overlap query: a mode, or the newcomer, with the spacing and next-to-last point
-/// the search reads (transient: computed per query, not kept with the modes).
-#[derive(Debug, Clone, Copy)]
-struct Run {
-    lo: f64,
-    hi: f64,
-    count: u64,
-    /// `(hi - lo) / (count - 1)` (0 for a single).
-    d: f64,
-    /// Point `count - 2` ([`Seg::at`]); `lo` for a single.
-    top: f64,
-}
-
-impl Run {
-    /// A run below every point, bounding a query's walks.
-    const SENTINEL_BELOW: Run = Run {
-        lo: f64::NEG_INFINITY,
-        hi: f64::NEG_INFINITY,
-        count: 0,
-        d: 0.0,
-        top: f64::NEG_INFINITY,
-    };
-
-    /// A run above every point.
-    const SENTINEL_ABOVE: Run = Run {
-        lo: f64::INFINITY,
-        hi: f64::INFINITY,
-        count: 0,
-        d: 0.0,
-        top: f64::INFINITY,
-    };
-
-    fn of(m: &PajotMode) -> Run {
-        let seg = Seg::new(m.lo, m.hi, m.count);
-        Run {
-            lo: m.lo,
-            hi: m.hi,
-            count: m.count,
-            d: seg.d,
-            top: seg.top,
-        }
-    }
-
-    /// The run as a [`Seg`] (its `w` not yet set).
-    #[inline(always)]
-    fn seg(&self) -> Seg {
-        Seg {
-            lo: self.lo,
-            hi: self.hi,
-            c: self.count,
-            d: self.d,
-            w: 0,
-            r: 0.0,
-            top: self.top,
-        }
-    }
-}
-
 /// ADR's state: the ordered, disjoint modes and the bound `m` (the top of the last extended
 /// mode).
 #[derive(Debug, Clone)]
@@ -320,17 +262,11 @@ impl Adr {
 fn query<T>(modes: &[PajotMode], l: f64, i: usize, f: impl FnOnce(&Query) -> T) -> T {
     SCRATCH.with_borrow_mut(|runs| {
         runs.clear();
-        runs.push(Run::SENTINEL_BELOW);
-        runs.extend(modes[..i].iter().map(Run::of));
-        runs.push(Run {
-            lo: l,
-            hi: l,
-            count: 1,
-            d: 0.0,
-            top: l,
-        });
-        runs.extend(modes[i..].iter().map(Run::of));
-        runs.push(Run::SENTINEL_ABOVE);
+        runs.push(Seg::BELOW);
+        runs.extend(modes[..i].iter().map(|m| Seg::new(m.lo, m.hi, m.count)));
+        runs.push(Seg::single(l));
+        runs.extend(modes[i..].iter().map(|m| Seg::new(m.lo, m.hi, m.count)));
+        runs.push(Seg::ABOVE);
         let mut total: u64 = 0;
         for m in modes {
             total = total.saturating_add(m.count);
@@ -347,7 +283,7 @@ fn query<T>(modes: &[PajotMode], l: f64, i: usize, f: impl FnOnce(&Query) -> T) 
 
 thread_local! {
     /// The runs of the current query: transient, not part of any pixel's state.
-    static SCRATCH: std::cell::RefCell<Vec<Run>> = const { std::cell::RefCell::new(Vec::new()) };
+    static SCRATCH: std::cell::RefCell<Vec<Seg>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// One run of ADR's point set: a mode's evenly spaced points, or the newcomer alone.
@@ -369,6 +305,24 @@ struct Seg {
 }
 
 impl Seg {
+    /// A run below every point, ending a query's walks.
+    const BELOW: Seg = Seg::sentinel(f64::NEG_INFINITY);
+
+    /// A run above every point.
+    const ABOVE: Seg = Seg::sentinel(f64::INFINITY);
+
+    const fn sentinel(x: f64) -> Seg {
+        Seg {
+            lo: x,
+            hi: x,
+            c: 0,
+            d: 0.0,
+            w: 0,
+            r: 0.0,
+            top: x,
+        }
+    }
+
     fn new(lo: f64, hi: f64, c: u64) -> Seg {
         let d = if c >= 2 {
             (hi - lo) / to_f64(c - 1)
@@ -558,7 +512,7 @@ fn ceil(x: f64) -> f64 {
 struct Query<'a> {
     /// The runs in order, between two sentinels: run `t` is `runs[t + 1]`, the newcomer is
     /// run `i`, and modes keep their index below it and shift by one above.
-    runs: &'a [Run],
+    runs: &'a [Seg],
     l: f64,
     i: usize,
     /// Number of points.
@@ -588,7 +542,7 @@ impl Query<'_> {
         // its other points need no test (those of the next mode are farther still).
         let mut first = None;
         'left: for s in (0..i).rev() {
-            let seg = self.runs[s + 1].seg().with_w(nn);
+            let seg = self.runs[s + 1].with_w(nn);
             for k in seg.nearest_first(true) {
                 let x = seg.at(k);
                 if x != l && !(l - x < reach) {
@@ -602,7 +556,7 @@ impl Query<'_> {
         }
         let mut last = None;
         'right: for s in i + 1..self.runs.len() - 2 {
-            let seg = self.runs[s + 1].seg().with_w(nn);
+            let seg = self.runs[s + 1].with_w(nn);
             for k in seg.nearest_first(false) {
                 let x = seg.at(k);
                 if x != l && !(x - l < reach) {
@@ -633,12 +587,12 @@ impl Query<'_> {
         for w in self.runs.windows(3) {
             let (below, r, above) = (&w[0], &w[1], &w[2]);
             let (prev, next) = (r.lo - below.hi, above.lo - r.hi);
-            if r.count == 1 {
+            if r.c == 1 {
                 nn_sum += min(prev, next);
             } else {
-                nn_sum += min(prev, r.seg().at(1) - r.lo);
+                nn_sum += min(prev, r.at(1) - r.lo);
                 nn_sum += min(next, r.hi - r.top);
-                nn_sum += to_f64(r.count - 2) * r.d;
+                nn_sum += to_f64(r.c - 2) * r.d;
             }
         }
         let nn = nn_sum / k;
@@ -667,10 +621,10 @@ impl Query<'_> {
             // exactly when nn / d rounds to at most 1, that is when nn <= d (d > 0): the
             // in-run part is 1 + (K(0) + K(0)) = 1, unless r^2 overflows (K(0) is then NaN,
             // as in the literal form).
-            if nn <= far && (r.count == 1 || r.d > 0.0 && nn <= r.d && r.d <= nn * 1e150) {
+            if nn <= far && (r.c == 1 || r.d > 0.0 && nn <= r.d && r.d <= nn * 1e150) {
                 continue;
             }
-            let seg = r.seg().with_w(nn);
+            let seg = r.with_w(nn);
             let (c, w) = (seg.c, seg.w);
             if nn <= far && seg.has_interior() && w < 8 {
                 // The common case, alone with a few neighbours on each side: the bottom points
@@ -768,14 +722,14 @@ impl Query<'_> {
             }
         }
         for run in self.runs[..s + 1].iter().rev() {
-            let (sum, done) = from_run(&run.seg(), x, nn, true);
+            let (sum, done) = from_run(run, x, nn, true);
             p += sum;
             if done {
                 break;
             }
         }
         for run in &self.runs[s + 2..] {
-            let (sum, done) = from_run(&run.seg(), x, nn, false);
+            let (sum, done) = from_run(run, x, nn, false);
             p += sum;
             if done {
                 break;
