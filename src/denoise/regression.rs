@@ -131,20 +131,24 @@ pub fn collaborative_regression(
 #[derive(Default)]
 struct Workspace {
     scratch: Scratch,
-    /// Per offset, the patch distance (at `k = 1`) of each tile pixel's neighbour there.
+    /// Patch distances (at `k = 1`) of every tile pixel to its neighbours: the window offsets
+    /// of tile pixel `t` are contiguous at `t·(2R+1)²`, so a window's distances are a few runs.
     dists: Vec<f32>,
+    /// One offset's distances over the tile, per channel and their maximum.
     dist: Vec<f32>,
-    /// Gathered window: design columns, colours, weights.
-    cols: Vec<Vec<f32>>,
-    /// √w per window pixel, and the weighted columns packed for one matrix product.
-    scaled: Vec<f32>,
-    packed: Vec<f32>,
-    ys: [Vec<f32>; 3],
-    pred: [Vec<f32>; 3],
-    ws: Vec<f32>,
-    /// The window of the current centre, its patch distances, and the centre's index in it.
-    window: Rect,
+    dmax: Vec<f32>,
+    /// The window of the current centre: its patch distances, colours (column-major `n×3`)
+    /// and normalised design columns (column-major `n×d`, constant first).
     dwin: Vec<f32>,
+    y: Vec<f32>,
+    x: Vec<f32>,
+    /// The weighted design and colours of every bandwidth (`n × (d+3)` each, column-major).
+    wz: Vec<f32>,
+    /// Every bandwidth's predictions (`n × 3` each, column-major).
+    pred: Vec<f32>,
+    /// Weights of every bandwidth, `n` each.
+    ws: Vec<f32>,
+    window: Rect,
     centre: usize,
     /// Design columns in use (the rest were constant in the window).
     used: usize,
@@ -160,6 +164,24 @@ struct Problem<'a> {
     bandwidths: &'a [f32],
 }
 
+/// `Σ aᵢbᵢ` with eight running sums, so that the loop vectorises.
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f32 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    acc.iter().sum::<f32>() + tail
+}
+
 impl Workspace {
     fn tile(&mut self, problem: &Problem<'_>, rect: Rect) -> Vec<TileSum> {
         let Problem {
@@ -173,12 +195,14 @@ impl Workspace {
         let (w, h) = (image.width(), image.height());
         let r = params.window_radius;
         let side = 2 * r + 1;
+        let offsets_n = side * side;
         let area = rect.area();
         self.dists.clear();
-        self.dists.resize(side * side * area, f32::NEG_INFINITY);
+        self.dists.resize(offsets_n * area, 0.0);
         self.dist.resize(TILE * TILE, 0.0);
+        self.dmax.resize(TILE * TILE, 0.0);
         for (o, (dy, dx)) in offsets(r).enumerate() {
-            let dmax = &mut self.dists[o * area..(o + 1) * area];
+            self.dmax[..area].fill(f32::NEG_INFINITY);
             for c in 0..guide.channels() {
                 let g = Guide {
                     value: guide.plane(c),
@@ -196,9 +220,12 @@ impl Workspace {
                     &mut self.scratch,
                     &mut self.dist,
                 );
-                for (m, d) in dmax.iter_mut().zip(&self.dist[..area]) {
+                for (m, d) in self.dmax[..area].iter_mut().zip(&self.dist[..area]) {
                     *m = m.max(*d);
                 }
+            }
+            for (t, &d) in self.dmax[..area].iter().enumerate() {
+                self.dists[t * offsets_n + o] = d;
             }
         }
         let out = Rect {
@@ -215,35 +242,30 @@ impl Workspace {
                 wsum: vec![0.0; out.area()],
             })
             .collect();
-        // The window's columns do not depend on the bandwidth: gather once, solve per `k`.
+        // The window's columns do not depend on the bandwidth: gather once, solve every `k`.
+        let dists = std::mem::take(&mut self.dists);
         for y in rect.y0..rect.y1 {
             for x in rect.x0..rect.x1 {
                 let t = (y - rect.y0) * rect.width() + (x - rect.x0);
-                self.gather(image, features, r, area, (x, y), t);
-                for (sum, &k) in sums.iter_mut().zip(bandwidths) {
-                    let scale = 1.0 / (k * k);
-                    self.ws.clear();
-                    self.ws.extend(self.dwin.iter().map(|&d| weight(d * scale)));
-                    self.ws[self.centre] = self.ws[self.centre].max(MIN_CENTER_WEIGHT);
-                    self.solve_and_spread(sum);
-                }
+                let window_dists = &dists[t * offsets_n..(t + 1) * offsets_n];
+                self.gather(image, features, r, window_dists, (x, y));
+                self.solve_and_spread(bandwidths, &mut sums);
             }
         }
+        self.dists = dists;
         sums
     }
 
-    /// Collects the window of centre `(x, y)` (tile index `t`), row by row: patch distances,
-    /// colours and the normalised design columns,
-    /// constant first, dropped columns moved past [`Self::used`].
-    #[allow(clippy::too_many_arguments)]
+    /// Collects the window of centre `(x, y)`, row by row: patch distances (from the centre's
+    /// distances to every offset, `dists`), colours and the normalised design columns,
+    /// constant first; columns constant in the window are dropped ([`Self::used`] are kept).
     fn gather(
         &mut self,
         image: &Planes,
         features: &Planes,
         r: usize,
-        area: usize,
+        dists: &[f32],
         (x, y): (usize, usize),
-        t: usize,
     ) {
         let (w, h) = (image.width(), image.height());
         let win = Rect {
@@ -254,106 +276,138 @@ impl Workspace {
         };
         self.window = win;
         let n = win.area();
+        let ww = win.width();
         let ncols = 3 + features.channels();
-        self.cols.resize_with(ncols, Vec::new);
-        for v in self.ys.iter_mut().chain(self.cols.iter_mut()) {
-            v.clear();
-        }
-        self.dwin.clear();
+        self.x.resize(ncols * n, 0.0);
+        self.y.resize(3 * n, 0.0);
+        self.dwin.resize(n, 0.0);
         let side = 2 * r + 1;
-        self.centre = (y - win.y0) * win.width() + (x - win.x0);
-        for wy in win.y0..win.y1 {
-            let o_row = (wy + r - y) * side + r;
-            for wx in win.x0..win.x1 {
-                self.dwin.push(self.dists[(o_row + wx - x) * area + t]);
-            }
+        self.centre = (y - win.y0) * ww + (x - win.x0);
+        let fc: Vec<f32> = (0..features.channels())
+            .map(|j| features.plane(j)[y * w + x])
+            .collect();
+        for (i, wy) in (win.y0..win.y1).enumerate() {
+            let at = i * ww..(i + 1) * ww;
+            let o = (wy + r - y) * side + r + win.x0 - x;
+            self.dwin[at.clone()].copy_from_slice(&dists[o..o + ww]);
             let row = wy * w + win.x0..wy * w + win.x1;
             for c in 0..3 {
-                self.ys[c].extend_from_slice(&image.plane(c)[row.clone()]);
+                self.y[c * n..][at.clone()].copy_from_slice(&image.plane(c)[row.clone()]);
             }
-            self.cols[1].extend((win.x0..win.x1).map(|wx| wx as f32 - x as f32));
-            self.cols[2].extend(std::iter::repeat_n(wy as f32 - y as f32, win.width()));
-            for j in 0..features.channels() {
-                let f = features.plane(j);
-                let fc = f[y * w + x];
-                self.cols[3 + j].extend(f[row.clone()].iter().map(|v| v - fc));
+            for (v, wx) in self.x[n..][at.clone()].iter_mut().zip(win.x0..win.x1) {
+                *v = wx as f32 - x as f32;
+            }
+            self.x[2 * n..][at.clone()].fill(wy as f32 - y as f32);
+            for (j, &centre) in fc.iter().enumerate() {
+                let f = &features.plane(j)[row.clone()];
+                for (v, fv) in self.x[(3 + j) * n..][at.clone()].iter_mut().zip(f) {
+                    *v = fv - centre;
+                }
             }
         }
-        self.cols[0].resize(n, 1.0);
+        self.x[..n].fill(1.0);
         let mut kept = 1;
         for j in 1..ncols {
-            let scale = self.cols[j].iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            let col = &mut self.x[j * n..(j + 1) * n];
+            let scale = col.iter().fold(0.0f32, |m, v| m.max(v.abs()));
             if scale > 0.0 && scale.is_finite() {
-                self.cols[j].iter_mut().for_each(|v| *v /= scale);
-                self.cols.swap(kept, j);
+                // A division, not a product with 1/scale: that overflows for subnormal scales.
+                col.iter_mut().for_each(|v| *v /= scale);
+                if kept != j {
+                    self.x.copy_within(j * n..(j + 1) * n, kept * n);
+                }
                 kept += 1;
             }
         }
         self.used = kept;
     }
 
-    /// Solves the weighted least squares of the gathered window and adds each prediction,
-    /// weighted, to `sum`.
-    fn solve_and_spread(&mut self, sum: &mut TileSum) {
-        let d = self.used;
-        let n = self.ws.len();
-        // [√w·X | √w·Y], column-major; one matrix product gives XᵀWX and XᵀWY (nalgebra hands
-        // it to matrixmultiply, which uses the CPU's vector units).
-        self.scaled.clear();
-        self.scaled.extend(self.ws.iter().map(|w| w.sqrt()));
-        self.packed.clear();
-        for col in self.cols[..d].iter().chain(&self.ys) {
-            self.packed
-                .extend(col.iter().zip(&self.scaled).map(|(x, s)| x * s));
+    /// Solves the weighted least squares of the gathered window for every bandwidth and adds
+    /// each prediction, weighted, to that bandwidth's sum.
+    fn solve_and_spread(&mut self, bandwidths: &[f32], sums: &mut [TileSum]) {
+        let (d, n, nk) = (self.used, self.dwin.len(), bandwidths.len());
+        self.ws.clear();
+        for &k in bandwidths {
+            let scale = 1.0 / (k * k);
+            let at = self.ws.len();
+            self.ws.extend(self.dwin.iter().map(|&v| weight(v * scale)));
+            let c = &mut self.ws[at + self.centre];
+            *c = c.max(MIN_CENTER_WEIGHT);
         }
-        let zt = DMatrix::from_row_slice(d, n, &self.packed[..d * n]);
-        let zy = DMatrix::from_column_slice(n, d + 3, &self.packed);
-        let moments = zt * zy;
-        let wsum: f64 = self.ws.iter().map(|&v| f64::from(v)).sum();
-        let gram = DMatrix::<f64>::from_fn(d, d, |i, j| {
-            let g = f64::from(moments[(i.min(j), i.max(j))]);
-            if i == j && i > 0 { g + RIDGE * wsum } else { g }
-        });
-        let rhs = DMatrix::<f64>::from_fn(d, 3, |i, c| f64::from(moments[(i, d + c)]));
-        let beta = match gram.cholesky() {
-            Some(ch) => ch.solve(&rhs),
-            None => {
-                let mut b = DMatrix::<f64>::zeros(d, 3);
-                for c in 0..3 {
-                    b[(0, c)] = rhs[(0, c)] / wsum;
-                }
-                b
-            }
-        };
-        // Weighted predictions, then row by row into the tile's sums.
-        for (c, pred) in self.pred.iter_mut().enumerate() {
-            pred.clear();
-            pred.resize(n, 0.0);
-            for (j, col) in self.cols[..d].iter().enumerate() {
-                let b = beta[(j, c)] as f32;
-                for (p, x) in pred.iter_mut().zip(col) {
-                    *p += x * b;
+        // W·X and W·Y of every bandwidth, then each moment as one dot product with X.
+        let block = d + 3;
+        self.wz.resize(n * nk * block, 0.0);
+        for (kk, wk) in self.ws.chunks_exact(n).enumerate() {
+            let cols = self.x[..d * n]
+                .chunks_exact(n)
+                .chain(self.y.chunks_exact(n));
+            for (j, col) in cols.enumerate() {
+                let dst = &mut self.wz[(kk * block + j) * n..][..n];
+                for ((o, v), wt) in dst.iter_mut().zip(col).zip(wk) {
+                    *o = v * wt;
                 }
             }
-            for (p, wt) in pred.iter_mut().zip(&self.ws) {
-                *p *= wt;
-            }
         }
-        let win = self.window;
-        let (rw, ww) = (sum.rect.width(), win.width());
-        for (i, wy) in (win.y0..win.y1).enumerate() {
-            let k = (wy - sum.rect.y0) * rw + (win.x0 - sum.rect.x0);
-            let src = i * ww..(i + 1) * ww;
+        self.pred.clear();
+        self.pred.resize(n * 3 * nk, 0.0);
+        for (kk, wk) in self.ws.chunks_exact(n).enumerate() {
+            let wz = &self.wz[kk * block * n..(kk + 1) * block * n];
+            let x = |j: usize| &self.x[j * n..(j + 1) * n];
+            let wsum: f64 = wk.iter().map(|&v| f64::from(v)).sum();
+            let mut gram = DMatrix::<f64>::zeros(d, d);
+            for i in 0..d {
+                for j in i..d {
+                    let g = f64::from(dot(x(i), &wz[j * n..(j + 1) * n]));
+                    gram[(i, j)] = g;
+                    gram[(j, i)] = g;
+                }
+                if i > 0 {
+                    gram[(i, i)] += RIDGE * wsum;
+                }
+            }
+            let rhs = DMatrix::<f64>::from_fn(d, 3, |i, c| {
+                f64::from(dot(x(i), &wz[(d + c) * n..(d + c + 1) * n]))
+            });
+            let beta = match gram.cholesky() {
+                Some(ch) => ch.solve(&rhs),
+                None => {
+                    let mut b = DMatrix::<f64>::zeros(d, 3);
+                    for c in 0..3 {
+                        b[(0, c)] = rhs[(0, c)] / wsum;
+                    }
+                    b
+                }
+            };
             for c in 0..3 {
-                for (a, p) in sum.acc[c][k..k + ww]
-                    .iter_mut()
-                    .zip(&self.pred[c][src.clone()])
-                {
+                let pred = &mut self.pred[(3 * kk + c) * n..][..n];
+                for j in 0..d {
+                    let b = beta[(j, c)] as f32;
+                    for (p, v) in pred.iter_mut().zip(&self.x[j * n..(j + 1) * n]) {
+                        *p += v * b;
+                    }
+                }
+            }
+        }
+        // Weighted predictions, row by row into each bandwidth's tile sums.
+        let win = self.window;
+        for (kk, (sum, wk)) in sums.iter_mut().zip(self.ws.chunks_exact(n)).enumerate() {
+            let (rw, ww) = (sum.rect.width(), win.width());
+            for (i, wy) in (win.y0..win.y1).enumerate() {
+                let k = (wy - sum.rect.y0) * rw + (win.x0 - sum.rect.x0);
+                let src = i * ww..(i + 1) * ww;
+                for c in 0..3 {
+                    let p = &self.pred[(3 * kk + c) * n..][src.clone()];
+                    for ((a, p), wt) in sum.acc[c][k..k + ww]
+                        .iter_mut()
+                        .zip(p)
+                        .zip(&wk[src.clone()])
+                    {
+                        *a += p * wt;
+                    }
+                }
+                for (a, p) in sum.wsum[k..k + ww].iter_mut().zip(&wk[src]) {
                     *a += p;
                 }
-            }
-            for (a, p) in sum.wsum[k..k + ww].iter_mut().zip(&self.ws[src]) {
-                *a += p;
             }
         }
     }
@@ -418,6 +472,26 @@ mod tests {
             for (a, b) in out.plane(c).iter().zip(image.plane(c)) {
                 assert!((a - b).abs() < 2e-4, "channel {c}: {a} vs {b}");
             }
+        }
+    }
+
+    /// A feature that varies only by subnormal amounts is normalised by division: the product
+    /// with `1/scale` overflows to ∞ there and turned the whole window into NaN.
+    #[test]
+    fn subnormal_feature_variation_stays_finite() {
+        let (w, h) = (12, 10);
+        let feature = Planes::from_planes(
+            w,
+            h,
+            vec![(0..w * h).map(|i| (i % 3) as f32 * 1e-40).collect()],
+        )
+        .unwrap();
+        let image = rgb(w, h, |x, y| [0.1 * x as f32, 0.2 * y as f32, 1.0]);
+        let var = Planes::zeros(w, h, 3);
+        let p = NlMeansParams::new(1, 3, 1.0).unwrap();
+        let out = collaborative_regression(&image, &image, &var, &feature, p, &[0.5, 1.0]).unwrap();
+        for o in &out {
+            assert_eq!(o.first_non_finite(), None);
         }
     }
 

@@ -111,8 +111,18 @@ impl FireflyRule {
     }
 
     /// Whether a pixel of luminance `lum` is a firefly over a reference of luminance `ref_lum`.
+    /// A negative reference (a denoiser's output can undershoot) counts as 0: otherwise a pixel
+    /// equal to it, say −1 against −1, would pass `−1 > 4·(−1) + 0.1`.
+    ///
+    /// ```
+    /// use fireflies::image::metrics::FireflyRule;
+    /// let rule = FireflyRule::default();
+    /// assert!(rule.is_firefly(0.5, 0.05));
+    /// assert!(!rule.is_firefly(-1.0, -1.0));
+    /// assert!(!rule.is_firefly(0.05, -1.0));
+    /// ```
     pub fn is_firefly(&self, lum: f64, ref_lum: f64) -> bool {
-        lum > self.factor * ref_lum + self.floor
+        lum > self.factor * ref_lum.max(0.0) + self.floor
     }
 }
 
