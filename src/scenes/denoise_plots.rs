@@ -96,7 +96,11 @@ pub fn write_plots(
     }
     // A series' points: spp, mean, and the interval where the cell has one.
     type Point = (f64, f64, Option<(f64, f64)>);
-    let panels = |y: &dyn Fn(&DenoiseCell) -> (f64, Option<f64>), axis: &Axis| -> Vec<Panel> {
+    // `range` cuts the intervals' ends to what the metric can take.
+    let panels = |y: &dyn Fn(&DenoiseCell) -> (f64, Option<f64>),
+                  range: (f64, f64),
+                  axis: &Axis|
+     -> Vec<Panel> {
         scenes
             .iter()
             .map(|scene| {
@@ -114,7 +118,8 @@ pub fn write_plots(
                             .filter(|r| r.source == spec && r.variance == variance)
                             .map(|r| {
                                 let (m, h) = y(r);
-                                (f64::from(r.spp), m, h.map(|h| (m - h, m + h)))
+                                let ci = h.map(|h| ((m - h).max(range.0), (m + h).min(range.1)));
+                                (f64::from(r.spp), m, ci)
                             })
                             .collect();
                         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -167,14 +172,23 @@ pub fn write_plots(
             legend: legend(),
             notes: vec![format!(
                 "relMSE = mean over pixels and channels of (x − r)² / (r² + 0.01), linear \
-                 radiance, against the scene's converged reference; lower is better. {}; NFOR \
+                 radiance, against the scene's converged reference; lower is better. {}{}; NFOR \
                  (Bitterli et al. 2016) denoises each source's two half images with the \
                  variance named.",
-                repeats_note
+                repeats_note,
+                if exp.repeats < 2 {
+                    ""
+                } else {
+                    " (cut at SSIM's range, [−1, 1])"
+                }
             )],
             cols: grid_cols(scenes.len()),
             panel: PANEL,
-            panels: panels(&|r| (r.relmse_mean, r.relmse_ci95), &relmse_axis),
+            panels: panels(
+                &|r| (r.relmse_mean, r.relmse_ci95),
+                (f64::NEG_INFINITY, f64::INFINITY),
+                &relmse_axis,
+            ),
         },
         Figure {
             name: "ssim_vs_spp",
@@ -182,12 +196,17 @@ pub fn write_plots(
             legend: legend(),
             notes: vec![format!(
                 "SSIM: Wang et al. 2004 on the luma of the display image (clamped to [0, 1], \
-                 sRGB curve), 11x11 Gaussian window, σ = 1.5; higher is better. {}.",
-                repeats_note
+                 sRGB curve), 11x11 Gaussian window, σ = 1.5; higher is better. {}{}.",
+                repeats_note,
+                if exp.repeats < 2 {
+                    ""
+                } else {
+                    " (cut at SSIM's range, [−1, 1])"
+                }
             )],
             cols: grid_cols(scenes.len()),
             panel: PANEL,
-            panels: panels(&|r| (r.ssim_mean, r.ssim_ci95), &ssim_axis),
+            panels: panels(&|r| (r.ssim_mean, r.ssim_ci95), (-1.0, 1.0), &ssim_axis),
         },
     ];
     let mut written = Vec::new();

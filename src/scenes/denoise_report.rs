@@ -425,6 +425,14 @@ fn pm(mean: f64, half: Option<f64>, f: impl Fn(f64) -> String) -> String {
     }
 }
 
+/// A relMSE `mean ± half-width`: the mean to four digits, the half-width to two.
+fn pm_relmse(mean: f64, half: Option<f64>) -> String {
+    match half {
+        Some(h) => format!("{mean:.3e} ± {h:.1e}"),
+        None => format!("{mean:.3e}"),
+    }
+}
+
 fn find<'a>(
     cells: &'a [DenoiseCell],
     scene: &str,
@@ -584,7 +592,7 @@ fn summary_md(
             for ((c, (src, var, _)), bold) in row.iter().zip(&columns).zip(bold) {
                 match c {
                     Some(r) => {
-                        let mut cell = pm(r.relmse_mean, r.relmse_ci95, |v| format!("{v:.3e}"));
+                        let mut cell = pm_relmse(r.relmse_mean, r.relmse_ci95);
                         if bold {
                             cell = format!("**{cell}**");
                         }
@@ -612,7 +620,8 @@ fn summary_md(
     if exp.repeats >= 2 {
         let _ = write!(
             s,
-            " Means over the {} repeats, `± ` the 95% interval's half-width (NFOR s: mean only).",
+            " Means over the {} repeats, after ± the half-width of their 95% interval (NFOR s: \
+             the mean only).",
             exp.repeats
         );
     }
@@ -647,7 +656,7 @@ fn summary_md(
                     &r.variance
                 },
                 r.stage,
-                pm(r.relmse_mean, r.relmse_ci95, |v| format!("{v:.3e}")),
+                pm_relmse(r.relmse_mean, r.relmse_ci95),
                 pm(r.ssim_mean, r.ssim_ci95, |v| format!("{v:.4}")),
                 if r.repeats < 2 {
                     format!("{}", r.firefly_pixels_mean)
@@ -880,7 +889,9 @@ fn summary_md(
         } else {
             format!(
                 "; each line is the mean over the {} repeats and its shaded band (an error bar \
-                 where a series has one point) the 95% Student-t interval of that mean",
+                 where a series has one point) the 95% Student-t interval of that mean, cut at \
+                 SSIM's range [−1, 1]; on the log relMSE axis a band whose lower end is at or \
+                 below zero runs down to the panel's floor",
                 exp.repeats
             )
         },
