@@ -17,6 +17,9 @@ use crate::report::plots::{
 use plotters::style::RGBColor;
 use std::path::{Path, PathBuf};
 
+/// A point of a series: spp, mean over repeats, and its interval where the cell has one.
+type Point = (f64, f64, Option<(f64, f64)>);
+
 /// The colour of a source (the mean in near-black) and of its `j`-th extra variance.
 fn colour(exp: &DenoiseExperiment, source: &str, variance_index: usize) -> RGBColor {
     let robust: Vec<String> = exp
@@ -94,8 +97,6 @@ pub fn write_plots(
             scenes.push(&r.scene);
         }
     }
-    // A series' points: spp, mean, and the interval where the cell has one.
-    type Point = (f64, f64, Option<(f64, f64)>);
     // `range` cuts the intervals' ends to what the metric can take.
     let panels = |y: &dyn Fn(&DenoiseCell) -> (f64, Option<f64>),
                   range: (f64, f64),
@@ -179,7 +180,7 @@ pub fn write_plots(
                 if exp.repeats < 2 {
                     ""
                 } else {
-                    " (cut at SSIM's range, [−1, 1])"
+                    " (a band whose lower end is at or below zero runs down to the panel's floor)"
                 }
             )],
             cols: grid_cols(scenes.len()),
@@ -221,7 +222,7 @@ pub fn write_plots(
 
 /// Shaded bands of a series along each run of consecutive points with an interval; a lone
 /// such point (a band of zero width) gets an error bar instead.
-fn spread(pts: &[(f64, f64, Option<(f64, f64)>)], colour: RGBColor) -> Vec<Mark> {
+fn spread(pts: &[Point], colour: RGBColor) -> Vec<Mark> {
     let mut marks = Vec::new();
     for run in pts.split(|p| p.2.is_none()).filter(|r| !r.is_empty()) {
         if let [(x, y, ci)] = run {
