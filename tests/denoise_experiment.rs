@@ -1,11 +1,16 @@
 //! `fireflies denoise-experiment` (src/scenes/denoise_*.rs): the experiment file parses full and
-//! quick, bad input names the entry at fault, and a quick run on cbox writes one row per spp,
-//! source, variance and stage, the MSE check, the figures, and shows that NFOR lowers the
-//! relMSE of a 16-spp mean render at least twofold.
+//! quick, bad input names the entry at fault, the mean over repeats and its Student-t interval
+//! match hand-computed values (empty with one repeat), the bold rule of the summary, and a quick
+//! run on cbox writes one row per spp, repeat, source, variance and stage, the per-cell summary
+//! over repeats, the MSE check, the figures, and shows that NFOR lowers the relMSE of a 16-spp
+//! mean render at least twofold.
 
 use fireflies::Error;
-use fireflies::scenes::denoise_experiment::DenoiseExperiment;
+use fireflies::scenes::denoise_experiment::{DenoiseExperiment, REPEAT_SEED_STRIDE};
+use fireflies::scenes::denoise_report::{clear_best, denoise_cells, mean_interval};
+use fireflies::scenes::denoise_run::DenoiseRow;
 use fireflies::scenes::nfor_input::{ColorSource, VarianceSource};
+use fireflies::scenes::tables::to_csv;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -58,6 +63,34 @@ fn the_experiment_file_parses_full_and_quick() {
         assert_eq!(q.spps, [4, 16]);
     }
     assert!(quick.mse_check.seeds <= 4);
+
+    // Four repeats, two in the quick run; repeat r's seed is seed + r·2³², clear of the MSE
+    // check's seeds 1..=16.
+    assert_eq!(full.repeats, 4);
+    assert_eq!(quick.repeats, 2);
+    assert_eq!(REPEAT_SEED_STRIDE, 1 << 32);
+    let seeds: Vec<u64> = (0..4).map(|r| full.repeat_seed(r)).collect();
+    assert_eq!(seeds, [0, 1 << 32, 2 << 32, 3 << 32]);
+    let check = 1..=u64::from(full.mse_check.seeds);
+    assert!(seeds.iter().all(|s| !check.contains(s)));
+}
+
+#[test]
+fn repeats_default_to_one_and_quick_caps_them() {
+    let text = std::fs::read_to_string("experiments/denoise.toml").unwrap();
+    let without = text
+        .replacen("repeats = 4\n", "", 1)
+        .replacen("repeats = 2\n", "", 1);
+    assert!(!without.contains("\nrepeats"), "{without}");
+    for quick in [false, true] {
+        let e = DenoiseExperiment::from_toml(&without, "t.toml", Path::new("experiments"), quick)
+            .unwrap();
+        assert_eq!(e.repeats, 1, "quick = {quick}");
+    }
+    // The quick run never renders more repeats than the full one.
+    let one = text.replacen("repeats = 4\n", "repeats = 1\n", 1);
+    let e = DenoiseExperiment::from_toml(&one, "t.toml", Path::new("experiments"), true).unwrap();
+    assert_eq!(e.repeats, 1);
 }
 
 /// The experiment text with one line replaced, parsed from the real folder.
@@ -132,6 +165,204 @@ fn bad_input_names_the_entry() {
         r#"rfilter = "tent""#,
         &[r#"scenes[4] ("living-room").rfilter"#],
     );
+    fails_naming(
+        "repeats = 4\n",
+        "repeats = 0\n",
+        &[": repeats = 0:", "at least 1"],
+    );
+    fails_naming(
+        "repeats = 2\n",
+        "repeats = 0\n",
+        &["quick.repeats = 0", "at least 1"],
+    );
+    fails_naming("repeats = 4\n", "repeats = -1\n", &["repeats", "line"]);
+}
+
+#[test]
+fn mean_interval_is_the_student_t_interval_of_the_mean() {
+    // [1, 2, 3, 4]: mean 2.5, sample variance 5/3, se = sqrt(5/3)/2 = 0.6454972243679028;
+    // t(0.975, 3) = 3.182446305 (tables; statrs gives it to ~1e-12), so the half-width is
+    // 2.054260256...
+    let m = mean_interval(&[1.0, 2.0, 3.0, 4.0]).unwrap();
+    assert_eq!(m.n, 4);
+    assert_eq!(m.mean, 2.5);
+    let se = (5.0f64 / 3.0).sqrt() / 2.0;
+    assert!((m.se.unwrap() - se).abs() < 1e-15, "{m:?}");
+    assert!(
+        (m.half_width.unwrap() - 3.182446305 * se).abs() < 1e-9,
+        "{m:?}"
+    );
+    assert!(
+        (m.half_width.unwrap() - 2.054_260_256_8).abs() < 1e-9,
+        "{m:?}"
+    );
+    // Two values: t(0.975, 1) = 12.706204736; [0, 2] has sd sqrt(2), se 1.
+    let m = mean_interval(&[0.0, 2.0]).unwrap();
+    assert_eq!(m.mean, 1.0);
+    assert!((m.half_width.unwrap() - 12.706204736).abs() < 1e-8, "{m:?}");
+    // Equal values: a zero-width interval, not NaN.
+    assert_eq!(mean_interval(&[3.0; 5]).unwrap().half_width, Some(0.0));
+    // One value: a mean and no interval; none: nothing.
+    let one = mean_interval(&[7.0]).unwrap();
+    assert_eq!((one.mean, one.se, one.half_width), (7.0, None, None));
+    assert_eq!(mean_interval(&[]), None);
+}
+
+/// A `denoise.csv` row with the given metrics; the rest fixed.
+fn row(repeat: u32, variance: &str, relmse: f64, ssim: f64, fireflies: u64) -> DenoiseRow {
+    let denoised = !variance.is_empty();
+    DenoiseRow {
+        scene: "s".into(),
+        width: 16,
+        height: 16,
+        spp: 16,
+        repeat,
+        seed: u64::from(repeat) << 32,
+        source: "mean".into(),
+        label: "mean".into(),
+        variance: variance.into(),
+        stage: if denoised { "denoised" } else { "noisy" }.into(),
+        relmse,
+        rmse: relmse.sqrt(),
+        ssim,
+        mean_bias: 0.0,
+        mean_bias_relative: Some(0.01 * f64::from(repeat)),
+        firefly_pixels: fireflies,
+        firefly_fraction: fireflies as f64 / 256.0,
+        render_wall_s: 1.0,
+        nfor_s: denoised.then_some(2.0),
+        nfor_s_per_megapixel: denoised.then_some(2.0 / 256e-6),
+        prefilter_s: None,
+        regression_s: None,
+        selection_s: None,
+        second_pass_s: None,
+        nfor_peak_rss_bytes: None,
+        nfor_peak_rss_reset: None,
+    }
+}
+
+/// `denoise_summary.csv` of `rows` as header and records.
+fn summary_csv(rows: &[DenoiseRow]) -> (Vec<String>, Vec<Vec<String>>) {
+    let bytes = to_csv(&denoise_cells(rows)).unwrap();
+    let mut r = csv::Reader::from_reader(bytes.as_slice());
+    let head = r.headers().unwrap().iter().map(String::from).collect();
+    let recs = r
+        .records()
+        .map(|x| x.unwrap().iter().map(String::from).collect())
+        .collect();
+    (head, recs)
+}
+
+const INTERVAL_COLUMNS: [&str; 10] = [
+    "relmse_se",
+    "relmse_ci95",
+    "ssim_se",
+    "ssim_ci95",
+    "firefly_pixels_se",
+    "firefly_pixels_ci95",
+    "mean_bias_relative_se",
+    "mean_bias_relative_ci95",
+    "nfor_s_per_megapixel_se",
+    "nfor_s_per_megapixel_ci95",
+];
+
+#[test]
+fn cells_average_repeats_and_one_repeat_has_empty_intervals() {
+    // Four repeats of a noisy and a denoised cell, interleaved as the run writes them.
+    let mut rows = Vec::new();
+    for r in 0..4u32 {
+        let x = f64::from(r + 1);
+        rows.push(row(r, "", x, 0.1 * x, u64::from(r)));
+        rows.push(row(r, "halves", 10.0 * x, 0.5, 3));
+    }
+    let (head, recs) = summary_csv(&rows);
+    let col = |name: &str| {
+        head.iter()
+            .position(|h| h == name)
+            .unwrap_or_else(|| panic!("{name} not in {head:?}"))
+    };
+    assert_eq!(recs.len(), 2, "{recs:?}");
+    let num = |rec: &Vec<String>, name: &str| -> f64 { rec[col(name)].parse().unwrap() };
+    let (noisy, denoised) = (&recs[0], &recs[1]);
+    assert_eq!(noisy[col("stage")], "noisy");
+    assert_eq!(noisy[col("variance")], "");
+    assert_eq!(denoised[col("variance")], "halves");
+    assert_eq!(noisy[col("repeats")], "4");
+    assert_eq!(num(noisy, "level"), 0.95);
+    // relMSE 1, 2, 3, 4: the worked case above.
+    let half = 3.182446305 * (5.0f64 / 3.0).sqrt() / 2.0;
+    assert_eq!(num(noisy, "relmse_mean"), 2.5);
+    assert!((num(noisy, "relmse_ci95") - half).abs() < 1e-9);
+    // SSIM 0.1..0.4 and bias 0, 1, 2, 3 % scale it; fireflies 0..3 shift it.
+    assert!((num(noisy, "ssim_mean") - 0.25).abs() < 1e-12);
+    assert!((num(noisy, "ssim_ci95") - 0.1 * half).abs() < 1e-9);
+    assert_eq!(num(noisy, "firefly_pixels_mean"), 1.5);
+    assert!((num(noisy, "firefly_pixels_ci95") - half).abs() < 1e-9);
+    assert!((num(noisy, "mean_bias_relative_mean") - 0.015).abs() < 1e-12);
+    assert!((num(noisy, "mean_bias_relative_ci95") - 0.01 * half).abs() < 1e-9);
+    // The noisy estimate has no NFOR time; equal values give a zero-width interval.
+    assert_eq!(noisy[col("nfor_s_per_megapixel_mean")], "");
+    assert_eq!(noisy[col("nfor_s_per_megapixel_ci95")], "");
+    assert_eq!(num(denoised, "relmse_mean"), 25.0);
+    assert_eq!(num(denoised, "ssim_ci95"), 0.0);
+    assert_eq!(num(denoised, "firefly_pixels_ci95"), 0.0);
+    assert_eq!(num(denoised, "nfor_s_per_megapixel_mean"), 2.0 / 256e-6);
+    assert_eq!(num(denoised, "nfor_s_per_megapixel_ci95"), 0.0);
+
+    // One repeat: means, and every interval column empty (not 0, not NaN).
+    let (head1, recs1) = summary_csv(&[row(0, "", 0.5, 0.7, 2), row(0, "sample", 0.1, 0.9, 0)]);
+    assert_eq!(head1, head);
+    assert_eq!(recs1.len(), 2);
+    for rec in &recs1 {
+        assert_eq!(rec[col("repeats")], "1");
+        for c in INTERVAL_COLUMNS {
+            assert_eq!(rec[col(c)], "", "{c} in {rec:?}");
+        }
+    }
+    assert_eq!(recs1[0][col("relmse_mean")], "0.5");
+    assert_eq!(recs1[1][col("ssim_mean")], "0.9");
+}
+
+#[test]
+fn only_a_clear_winner_is_bold() {
+    // Without intervals: the lowest, every one of them on a tie.
+    let plain = |v: &[f64]| -> Vec<Option<(f64, Option<f64>)>> {
+        v.iter().map(|&m| Some((m, None))).collect()
+    };
+    assert_eq!(clear_best(&plain(&[3.0, 1.0, 2.0])), [false, true, false]);
+    assert_eq!(clear_best(&plain(&[1.0, 2.0, 1.0])), [true, false, true]);
+    // With intervals: 1 ± 0.5 against 2 ± 0.4 ([0.5, 1.5] below [1.6, 2.4]) is bold ...
+    let a = [Some((2.0, Some(0.4))), Some((1.0, Some(0.5))), None];
+    assert_eq!(clear_best(&a), [false, true, false]);
+    // ... against 2 ± 0.5 (touching at 1.5) it is not ...
+    assert_eq!(
+        clear_best(&[Some((2.0, Some(0.5))), Some((1.0, Some(0.5)))]),
+        [false, false]
+    );
+    // ... nor when a third cell with a higher mean but a wide interval overlaps it ...
+    assert_eq!(
+        clear_best(&[
+            Some((2.0, Some(0.1))),
+            Some((1.0, Some(0.2))),
+            Some((5.0, Some(4.5)))
+        ]),
+        [false, false, false]
+    );
+    // ... nor on an exact tie.
+    assert_eq!(
+        clear_best(&[Some((1.0, Some(0.1))), Some((1.0, Some(0.1)))]),
+        [false, false]
+    );
+    // A NaN cell is neither bold nor compared; nothing finite, nothing bold.
+    assert_eq!(
+        clear_best(&[
+            Some((f64::NAN, None)),
+            Some((1.0, Some(0.1))),
+            Some((2.0, Some(0.1)))
+        ]),
+        [false, true, false]
+    );
+    assert_eq!(clear_best(&[None, Some((f64::NAN, None))]), [false, false]);
 }
 
 /// cbox alone, with the real file's sources and quick settings; two MSE-check seeds.
@@ -172,12 +403,17 @@ fn a_quick_cbox_run_writes_its_report_and_nfor_helps_the_mean() {
     let head = reader.headers().unwrap().clone();
     let col = |name: &str| head.iter().position(|h| h == name).unwrap();
     let rows: Vec<csv::StringRecord> = reader.records().map(Result::unwrap).collect();
-    // 16 spp: three noisy rows, and NFOR for mean (halves, sample), G-MoN and Zirr (halves).
-    assert_eq!(rows.len(), 3 + 4, "{csv}");
-    let relmse = |source: &str, variance: &str| -> f64 {
+    // 16 spp, two repeats: three noisy rows, and NFOR for mean (halves, sample), G-MoN and Zirr
+    // (halves), per repeat.
+    assert_eq!(rows.len(), 2 * (3 + 4), "{csv}");
+    let relmse = |repeat: &str, source: &str, variance: &str| -> f64 {
         rows.iter()
-            .find(|r| &r[col("source")] == source && &r[col("variance")] == variance)
-            .unwrap_or_else(|| panic!("{source} {variance}"))[col("relmse")]
+            .find(|r| {
+                &r[col("repeat")] == repeat
+                    && &r[col("source")] == source
+                    && &r[col("variance")] == variance
+            })
+            .unwrap_or_else(|| panic!("{repeat} {source} {variance}"))[col("relmse")]
         .parse()
         .unwrap()
     };
@@ -188,18 +424,82 @@ fn a_quick_cbox_run_writes_its_report_and_nfor_helps_the_mean() {
         let denoised = &r[col("stage")] == "denoised";
         assert_eq!(r[col("variance")].is_empty(), !denoised);
         assert_eq!(!r[col("nfor_s")].is_empty(), denoised);
+        // Repeat 0 keeps the file's seed 0; repeat 1 is 2^32 past it.
+        let seed = match &r[col("repeat")] {
+            "0" => "0",
+            "1" => "4294967296",
+            other => panic!("repeat {other}"),
+        };
+        assert_eq!(&r[col("seed")], seed);
     }
+    // The two repeats are different renders.
+    assert_ne!(relmse("0", "mean", ""), relmse("1", "mean", ""));
     // The claim: NFOR lowers the 16-spp mean's relMSE at least twofold with the renderer's
-    // sample variance (measured on this 64x64 quick run: 1.94e-2 -> 5.77e-3, 3.4x; at 32x32
-    // only 1.95x, too little image around each pixel). The render and NFOR are deterministic:
-    // this either holds or the renderer or the denoiser changed.
-    let (noisy, nfor) = (relmse("mean", ""), relmse("mean", "sample"));
+    // sample variance (measured on this 64x64 quick run, repeat 0 = seed 0: 1.94e-2 -> 5.77e-3,
+    // 3.4x; at 32x32 only 1.95x, too little image around each pixel). The render and NFOR are
+    // deterministic: this either holds or the renderer or the denoiser changed.
+    let (noisy, nfor) = (relmse("0", "mean", ""), relmse("0", "mean", "sample"));
     assert!(nfor * 2.0 <= noisy, "noisy {noisy}, NFOR {nfor}");
+
+    // One summary row per cell, its mean the mean of the two repeats' rows, with an interval.
+    let table = std::fs::read_to_string(out.join("denoise_summary.csv")).unwrap();
+    let mut reader = csv::Reader::from_reader(table.as_bytes());
+    let head = reader.headers().unwrap().clone();
+    let scol = |name: &str| {
+        head.iter()
+            .position(|h| h == name)
+            .unwrap_or_else(|| panic!("{name} not in {head:?}"))
+    };
+    let cells: Vec<csv::StringRecord> = reader.records().map(Result::unwrap).collect();
+    assert_eq!(cells.len(), 3 + 4, "{table}");
+    for name in [
+        "scene",
+        "spp",
+        "source",
+        "variance",
+        "stage",
+        "repeats",
+        "level",
+        "relmse_mean",
+        "relmse_se",
+        "relmse_ci95",
+        "ssim_mean",
+        "ssim_ci95",
+        "firefly_pixels_mean",
+        "firefly_pixels_ci95",
+        "mean_bias_relative_mean",
+        "mean_bias_relative_ci95",
+        "nfor_s_per_megapixel_mean",
+        "nfor_s_per_megapixel_ci95",
+    ] {
+        scol(name);
+    }
+    let cell = cells
+        .iter()
+        .find(|c| &c[scol("source")] == "mean" && &c[scol("variance")] == "sample")
+        .unwrap();
+    assert_eq!(&cell[scol("repeats")], "2");
+    let mean: f64 = cell[scol("relmse_mean")].parse().unwrap();
+    let two = 0.5 * (relmse("0", "mean", "sample") + relmse("1", "mean", "sample"));
+    assert!((mean - two).abs() <= 1e-12 * two, "{mean} {two}");
+    // Two repeats: half-width t(0.975, 1) · |x0 − x1| / 2.
+    let half: f64 = cell[scol("relmse_ci95")].parse().unwrap();
+    let d = (relmse("0", "mean", "sample") - relmse("1", "mean", "sample")).abs();
+    assert!(
+        (half - 12.706204736 * d / 2.0).abs() <= 1e-8 * half,
+        "{half} {d}"
+    );
+    for c in &cells {
+        let denoised = &c[scol("stage")] == "denoised";
+        assert!(!c[scol("relmse_ci95")].is_empty());
+        assert_eq!(!c[scol("nfor_s_per_megapixel_ci95")].is_empty(), denoised);
+    }
 
     let mse = std::fs::read_to_string(out.join("mse_check.csv")).unwrap();
     // One interval per variance (sample, halves) and bandwidth (0.5, 1) over the two seeds.
     assert_eq!(mse.lines().count(), 1 + 4, "{mse}");
     for f in [
+        "denoise_summary.csv",
         "mse_estimates.csv",
         "scenes.csv",
         "manifest.json",
@@ -215,6 +515,11 @@ fn a_quick_cbox_run_writes_its_report_and_nfor_helps_the_mean() {
     let summary = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(summary.contains("QUICK RUN"), "{summary}");
     assert!(summary.contains("Does NFOR's MSE estimate hold"));
+    assert!(
+        summary.contains("the mean over 2 independent renders"),
+        "{summary}"
+    );
+    assert!(summary.contains(" ± "), "{summary}");
     assert!(
         out.join("references")
             .join("cbox-64x64.exr.state")

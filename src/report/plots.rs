@@ -35,7 +35,7 @@ const FAN_PANEL: (u32, u32) = (400, 300);
 /// Outer margin of a figure, pixels.
 const MARGIN: i32 = 16;
 /// Opacity of a 95% confidence band.
-const CI_ALPHA: f64 = 0.18;
+pub(crate) const CI_ALPHA: f64 = 0.18;
 /// Grey of reference lines (zero, 1/n) and neutral legend swatches.
 pub(crate) const REF_GREY: RGBColor = RGBColor(110, 110, 110);
 /// Grey of grid lines.

@@ -3,8 +3,13 @@
 //! check of NFOR's own MSE estimate over seeds. Unknown keys are errors naming the key and line;
 //! a bad entry names the file and the entry.
 //!
+//! Every scene and spp is rendered `repeats` times, repeat `r` with seed
+//! `seed + r · 2³²` ([`DenoiseExperiment::repeat_seed`]): repeat 0 is the run of one repeat, and
+//! no repeat meets the MSE check's seeds `seed + 1 ..= seed + seeds` (`seeds` is a `u32`).
+//!
 //! ```toml
 //! seed = 0
+//! repeats = 4
 //! spp = [4, 16, 64]
 //! montage_spp = 16
 //!
@@ -27,6 +32,7 @@
 //! spp = [4, 16]
 //! reference_spp = 256
 //! seeds = 4
+//! repeats = 2
 //!
 //! [[scenes]]
 //! name = "cbox"
@@ -82,6 +88,9 @@ fn default_mean() -> String {
 fn default_sample() -> Vec<String> {
     vec!["sample".into()]
 }
+fn default_one() -> u32 {
+    1
+}
 fn default_factor() -> f64 {
     FireflyRule::DEFAULT_FACTOR
 }
@@ -101,6 +110,9 @@ pub struct QuickEntry {
     pub reference_spp: u64,
     /// Cap on the MSE check's seeds.
     pub seeds: u32,
+    /// Cap on `repeats` (default 1).
+    #[serde(default = "default_one")]
+    pub repeats: u32,
 }
 
 /// One scene as written.
@@ -132,9 +144,13 @@ pub struct DenoiseFile {
     /// One line on what the experiment shows.
     #[serde(default)]
     pub description: String,
-    /// Seed of every render (the MSE check uses the next `seeds` seeds).
+    /// Seed of the first repeat's renders (the MSE check uses the next `seeds` seeds; see
+    /// [`DenoiseExperiment::repeat_seed`] for the other repeats).
     pub seed: u64,
-    /// Sample counts of each render (one render per count), unless a scene gives its own.
+    /// Independent renders per scene and spp (default 1), for intervals over repeats.
+    #[serde(default = "default_one")]
+    pub repeats: u32,
+    /// Sample counts of each render (`repeats` renders per count), unless a scene gives its own.
     pub spp: Vec<u32>,
     /// Samples per pixel of the crops in `montage.png` (one of every scene's counts).
     pub montage_spp: u32,
@@ -173,7 +189,7 @@ pub struct Source {
 pub struct DenoiseScene {
     /// Name, file, size, reference spp, filter.
     pub scene: Scene,
-    /// Sample counts, ascending and distinct; one render each.
+    /// Sample counts, ascending and distinct; `repeats` renders each.
     pub spps: Vec<u32>,
 }
 
@@ -211,7 +227,13 @@ pub struct DenoiseExperiment {
     pub mse_check: MseCheck,
     /// Samples per pixel of the montage's crops.
     pub montage_spp: u32,
+    /// Renders per scene and spp (after `--quick`'s cap), at least 1.
+    pub repeats: u32,
 }
+
+/// Distance between the seeds of consecutive repeats: larger than any MSE-check offset
+/// (`seeds` is a `u32`), so a repeat's render never reuses an MSE-check render's seed.
+pub const REPEAT_SEED_STRIDE: u64 = 1 << 32;
 
 /// Parses a variance name.
 pub fn parse_variance(text: &str) -> Option<VarianceSource> {
@@ -354,6 +376,19 @@ impl DenoiseExperiment {
             ));
         }
         let quick_spps = check_spps(&q.spp, "quick.spp")?;
+        for (key, v) in [("repeats", file.repeats), ("quick.repeats", q.repeats)] {
+            if v < 1 {
+                return Err((
+                    format!("{key} = {v}"),
+                    "must be at least 1 (renders per scene and sample count)".into(),
+                ));
+            }
+        }
+        let repeats = if quick {
+            file.repeats.min(q.repeats)
+        } else {
+            file.repeats
+        };
         if file.scenes.is_empty() {
             return Err(("scenes".into(), "give at least one [[scenes]] entry".into()));
         }
@@ -523,7 +558,15 @@ impl DenoiseExperiment {
             scenes,
             mse_check,
             montage_spp,
+            repeats,
         })
+    }
+
+    /// The seed of repeat `r` (from 0): `seed + r · 2³²`, wrapping. Repeat 0 keeps `seed`.
+    pub fn repeat_seed(&self, r: u32) -> u64 {
+        self.file
+            .seed
+            .wrapping_add(u64::from(r).wrapping_mul(REPEAT_SEED_STRIDE))
     }
 
     /// The estimators every render runs: each source's, in file order.

@@ -1,19 +1,24 @@
-//! The denoising experiment's figures, drawn from its rows and images only: relMSE and SSIM
-//! against spp per scene (one colour per source, dashed its noisy estimate, solid NFOR's output)
-//! with the house renderer of [`crate::report::plots`], and `montage.png`, crops of every image
-//! at one spp, with the scene experiment's tiles ([`super::plots`]).
+//! The denoising experiment's figures, drawn from its cells (`denoise_summary.csv`) and images
+//! only: relMSE and SSIM against spp per scene (one colour per source, dashed its noisy
+//! estimate, solid NFOR's output; the mean over repeats with its 95% interval shaded) with the
+//! house renderer of [`crate::report::plots`], and `montage.png`, crops of every image of the
+//! first repeat at one spp, with the scene experiment's tiles ([`super::plots`]).
 
 use super::denoise_experiment::{DenoiseExperiment, variance_name};
-use super::denoise_run::{DenoiseRow, DenoiseSceneResult};
+use super::denoise_report::DenoiseCell;
+use super::denoise_run::DenoiseSceneResult;
 use super::plots::{Tile, crop_row, draw_tiles};
 use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
 use crate::report::plots::{
-    Axis, Figure, Legend, LegendKind, MEAN_COLOUR, Mark, PALETTE, PANEL, Panel, grid_cols, layered,
-    register_fonts, write_figure,
+    Axis, CI_ALPHA, Figure, Legend, LegendKind, MEAN_COLOUR, Mark, PALETTE, PANEL, Panel, REF_GREY,
+    grid_cols, layered, register_fonts, write_figure,
 };
 use plotters::style::RGBColor;
 use std::path::{Path, PathBuf};
+
+/// A point of a series: spp, mean over repeats, and its interval where the cell has one.
+type Point = (f64, f64, Option<(f64, f64)>);
 
 /// The colour of a source (the mean in near-black) and of its `j`-th extra variance.
 fn colour(exp: &DenoiseExperiment, source: &str, variance_index: usize) -> RGBColor {
@@ -52,7 +57,7 @@ fn colour(exp: &DenoiseExperiment, source: &str, variance_index: usize) -> RGBCo
 pub fn write_plots(
     dir: &Path,
     exp: &DenoiseExperiment,
-    rows: &[DenoiseRow],
+    cells: &[DenoiseCell],
     results: &[DenoiseSceneResult],
 ) -> Result<Vec<PathBuf>> {
     register_fonts()?;
@@ -74,19 +79,33 @@ pub fn write_plots(
                 });
             }
         }
+        if exp.repeats >= 2 {
+            legend.push(Legend {
+                label: format!(
+                    "shaded: 95% Student-t interval of the mean over {} renders",
+                    exp.repeats
+                ),
+                colour: REF_GREY,
+                kind: LegendKind::Band(2.0 * CI_ALPHA),
+            });
+        }
         legend
     };
     let mut scenes: Vec<&str> = Vec::new();
-    for r in rows {
+    for r in cells {
         if !scenes.contains(&r.scene.as_str()) {
             scenes.push(&r.scene);
         }
     }
-    let panels = |y: &dyn Fn(&DenoiseRow) -> f64, axis: &Axis| -> Vec<Panel> {
+    // `range` cuts the intervals' ends to what the metric can take.
+    let panels = |y: &dyn Fn(&DenoiseCell) -> (f64, Option<f64>),
+                  range: (f64, f64),
+                  axis: &Axis|
+     -> Vec<Panel> {
         scenes
             .iter()
             .map(|scene| {
-                let own: Vec<&DenoiseRow> = rows.iter().filter(|r| r.scene == *scene).collect();
+                let own: Vec<&DenoiseCell> = cells.iter().filter(|r| r.scene == *scene).collect();
                 let mut marks = Vec::new();
                 for src in &exp.sources {
                     let spec = src.spec.to_string();
@@ -95,16 +114,22 @@ pub fn write_plots(
                         series.push((variance_name(v).to_string(), j, false));
                     }
                     for (variance, j, dashed) in series {
-                        let mut pts: Vec<(f64, f64)> = own
+                        let mut pts: Vec<Point> = own
                             .iter()
                             .filter(|r| r.source == spec && r.variance == variance)
-                            .map(|r| (f64::from(r.spp), y(r)))
+                            .map(|r| {
+                                let (m, h) = y(r);
+                                let ci = h.map(|h| ((m - h).max(range.0), (m + h).min(range.1)));
+                                (f64::from(r.spp), m, ci)
+                            })
                             .collect();
                         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+                        let colour = colour(exp, &spec, j);
+                        marks.extend(spread(&pts, colour));
                         if !pts.is_empty() {
                             marks.push(Mark::Line {
-                                pts,
-                                colour: colour(exp, &spec, j),
+                                pts: pts.iter().map(|&(x, m, _)| (x, m)).collect(),
+                                colour,
                                 width: 2,
                                 dashed,
                                 markers: true,
@@ -128,6 +153,16 @@ pub fn write_plots(
             })
             .collect()
     };
+    let repeats_note = if exp.repeats < 2 {
+        "One render per spp, no interval".to_string()
+    } else {
+        format!(
+            "Lines: mean over {} independent renders per spp; shaded: its 95% Student-t \
+             interval (an error bar where a series has one spp), each render judged against \
+             the same reference",
+            exp.repeats
+        )
+    };
     let relmse_axis = Axis::log("relMSE (ε = 0.01), log scale");
     let mut ssim_axis = Axis::linear("SSIM of the display luma");
     ssim_axis.include_zero = false;
@@ -136,29 +171,43 @@ pub fn write_plots(
             name: "relmse_vs_spp",
             title: format!("relMSE against samples per pixel, before and after NFOR{tag}"),
             legend: legend(),
-            notes: vec![
+            notes: vec![format!(
                 "relMSE = mean over pixels and channels of (x − r)² / (r² + 0.01), linear \
-                 radiance, against the scene's converged reference; lower is better. One render \
-                 per spp; NFOR (Bitterli et al. 2016) denoises each source's two half images \
-                 with the variance named."
-                    .into(),
-            ],
+                 radiance, against the scene's converged reference; lower is better. {}{}; NFOR \
+                 (Bitterli et al. 2016) denoises each source's two half images with the \
+                 variance named.",
+                repeats_note,
+                if exp.repeats < 2 {
+                    ""
+                } else {
+                    " (a band whose lower end is at or below zero runs down to the panel's floor)"
+                }
+            )],
             cols: grid_cols(scenes.len()),
             panel: PANEL,
-            panels: panels(&|r| r.relmse, &relmse_axis),
+            panels: panels(
+                &|r| (r.relmse_mean, r.relmse_ci95),
+                (f64::NEG_INFINITY, f64::INFINITY),
+                &relmse_axis,
+            ),
         },
         Figure {
             name: "ssim_vs_spp",
             title: format!("SSIM against samples per pixel, before and after NFOR{tag}"),
             legend: legend(),
-            notes: vec![
+            notes: vec![format!(
                 "SSIM: Wang et al. 2004 on the luma of the display image (clamped to [0, 1], \
-                 sRGB curve), 11x11 Gaussian window, σ = 1.5; higher is better."
-                    .into(),
-            ],
+                 sRGB curve), 11x11 Gaussian window, σ = 1.5; higher is better. {}{}.",
+                repeats_note,
+                if exp.repeats < 2 {
+                    ""
+                } else {
+                    " (cut at SSIM's range, [−1, 1])"
+                }
+            )],
             cols: grid_cols(scenes.len()),
             panel: PANEL,
-            panels: panels(&|r| r.ssim, &ssim_axis),
+            panels: panels(&|r| (r.ssim_mean, r.ssim_ci95), (-1.0, 1.0), &ssim_axis),
         },
     ];
     let mut written = Vec::new();
@@ -169,6 +218,32 @@ pub fn write_plots(
         written.push(montage(dir, exp, results, tag)?);
     }
     Ok(written)
+}
+
+/// Shaded bands of a series along each run of consecutive points with an interval; a lone
+/// such point (a band of zero width) gets an error bar instead.
+fn spread(pts: &[Point], colour: RGBColor) -> Vec<Mark> {
+    let mut marks = Vec::new();
+    for run in pts.split(|p| p.2.is_none()).filter(|r| !r.is_empty()) {
+        if let [(x, y, ci)] = run {
+            marks.push(Mark::Point {
+                x: *x,
+                y: *y,
+                ci: *ci,
+                colour,
+                label: String::new(),
+            });
+            continue;
+        }
+        marks.push(Mark::Band {
+            x: run.iter().map(|p| p.0).collect(),
+            lo: run.iter().map(|p| p.2.map_or(p.1, |c| c.0)).collect(),
+            hi: run.iter().map(|p| p.2.map_or(p.1, |c| c.1)).collect(),
+            colour,
+            alpha: CI_ALPHA,
+        });
+    }
+    marks
 }
 
 /// `montage.png`: per scene the crop of the reference, each noisy estimate and each NFOR output

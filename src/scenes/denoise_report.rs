@@ -1,5 +1,6 @@
-//! The denoising experiment's report: `denoise.csv` (one row per scene, spp, source, variance
-//! and stage), `mse_estimates.csv` (NFOR's MSE estimate against the truth), `scenes.csv`,
+//! The denoising experiment's report: `denoise.csv` (one row per scene, spp, repeat, source,
+//! variance and stage), `denoise_summary.csv` (per cell the mean over repeats with a Student-t
+//! interval, [`denoise_cells`]), `mse_estimates.csv` (NFOR's MSE estimate against the truth), `scenes.csv`,
 //! `summary.md`, `manifest.json`, and the figures `relmse_vs_spp.png`, `ssim_vs_spp.png` and
 //! `montage.png`. Every file is written atomically; the reference cache beside them is left
 //! alone.
@@ -15,6 +16,233 @@ use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, StudentsT};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+
+/// The mean of independent values and its two-sided Student-t interval at [`LEVEL`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeanInterval {
+    /// How many values.
+    pub n: usize,
+    /// Their mean.
+    pub mean: f64,
+    /// Standard error of the mean, `sd / √n` (sample sd, `n − 1` in the denominator); `None`
+    /// for one value.
+    pub se: Option<f64>,
+    /// Half-width of the interval, `t(1 − (1 − LEVEL)/2, n − 1) · se`; `None` for one value.
+    pub half_width: Option<f64>,
+}
+
+/// The mean of `values` with its Student-t interval; `None` for no values. One value has a mean
+/// and no interval.
+///
+/// ```
+/// use fireflies::scenes::denoise_report::mean_interval;
+/// let m = mean_interval(&[1.0, 2.0, 3.0, 4.0]).unwrap();
+/// assert_eq!(m.mean, 2.5);
+/// // t(0.975, 3) · sd / √4 with sd = √(5/3).
+/// assert!((m.half_width.unwrap() - 3.182446305 * (5.0f64 / 3.0).sqrt() / 2.0).abs() < 1e-8);
+/// assert_eq!(mean_interval(&[7.0]).unwrap().half_width, None);
+/// ```
+pub fn mean_interval(values: &[f64]) -> Option<MeanInterval> {
+    let n = values.len();
+    if n == 0 {
+        return None;
+    }
+    let nf = n as f64;
+    let mean = values.iter().sum::<f64>() / nf;
+    if n < 2 {
+        return Some(MeanInterval {
+            n,
+            mean,
+            se: None,
+            half_width: None,
+        });
+    }
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (nf - 1.0);
+    let se = (var / nf).sqrt();
+    let t = StudentsT::new(0.0, 1.0, nf - 1.0)
+        .map(|d| d.inverse_cdf(0.5 + LEVEL / 2.0))
+        .unwrap_or(f64::NAN);
+    Some(MeanInterval {
+        n,
+        mean,
+        se: Some(se),
+        half_width: Some(t * se),
+    })
+}
+
+/// One row of `denoise_summary.csv`: a cell of the experiment (scene, spp, source, variance,
+/// stage) over its repeats. Each metric has its mean over repeats, the standard error of that
+/// mean and the half-width of its 95% Student-t interval (`_ci95`: the interval is
+/// `mean ± ci95`); with one repeat the `_se` and `_ci95` columns are empty. Every repeat is
+/// judged against the same reference, so the interval holds the renders' noise, not the
+/// reference's (which is common to all repeats).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct DenoiseCell {
+    /// Scene name.
+    pub scene: String,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Source estimator spec.
+    pub source: String,
+    /// Its short label.
+    pub label: String,
+    /// Variance given to NFOR; empty for the noisy estimate.
+    pub variance: String,
+    /// `noisy` or `denoised`.
+    pub stage: String,
+    /// Repeats (independent renders) the cell averages.
+    pub repeats: usize,
+    /// Confidence level of the `_ci95` columns.
+    pub level: f64,
+    /// Mean relMSE over repeats.
+    pub relmse_mean: f64,
+    /// Its standard error.
+    pub relmse_se: Option<f64>,
+    /// Its interval's half-width.
+    pub relmse_ci95: Option<f64>,
+    /// Mean SSIM.
+    pub ssim_mean: f64,
+    /// Its standard error.
+    pub ssim_se: Option<f64>,
+    /// Its interval's half-width.
+    pub ssim_ci95: Option<f64>,
+    /// Mean count of firefly pixels.
+    pub firefly_pixels_mean: f64,
+    /// Its standard error.
+    pub firefly_pixels_se: Option<f64>,
+    /// Its interval's half-width.
+    pub firefly_pixels_ci95: Option<f64>,
+    /// Mean relative bias of the image-mean luminance (empty if any repeat has none).
+    pub mean_bias_relative_mean: Option<f64>,
+    /// Its standard error.
+    pub mean_bias_relative_se: Option<f64>,
+    /// Its interval's half-width.
+    pub mean_bias_relative_ci95: Option<f64>,
+    /// Mean NFOR seconds (denoised cells).
+    pub nfor_s_mean: Option<f64>,
+    /// Mean NFOR seconds per megapixel (denoised cells).
+    pub nfor_s_per_megapixel_mean: Option<f64>,
+    /// Its standard error.
+    pub nfor_s_per_megapixel_se: Option<f64>,
+    /// Its interval's half-width.
+    pub nfor_s_per_megapixel_ci95: Option<f64>,
+}
+
+/// Mean, standard error and half-width of one metric over a cell's rows; all `None` when a row
+/// lacks the metric.
+fn metric(
+    own: &[&DenoiseRow],
+    f: impl Fn(&DenoiseRow) -> Option<f64>,
+) -> (Option<f64>, Option<f64>, Option<f64>) {
+    let values: Option<Vec<f64>> = own.iter().map(|r| f(r)).collect();
+    values
+        .and_then(|v| mean_interval(&v))
+        .map_or((None, None, None), |m| (Some(m.mean), m.se, m.half_width))
+}
+
+/// The cells of `rows`, in order of first appearance: one per scene, spp, source, variance and
+/// stage, over its repeats.
+pub fn denoise_cells(rows: &[DenoiseRow]) -> Vec<DenoiseCell> {
+    let key = |r: &DenoiseRow| {
+        (
+            r.scene.clone(),
+            r.spp,
+            r.source.clone(),
+            r.variance.clone(),
+            r.stage.clone(),
+        )
+    };
+    let mut keys = Vec::new();
+    for r in rows {
+        let k = key(r);
+        if !keys.contains(&k) {
+            keys.push(k);
+        }
+    }
+    keys.into_iter()
+        .filter_map(|k| {
+            let own: Vec<&DenoiseRow> = rows.iter().filter(|r| key(r) == k).collect();
+            let first = own.first()?;
+            let (relmse_mean, relmse_se, relmse_ci95) = metric(&own, |r| Some(r.relmse));
+            let (ssim_mean, ssim_se, ssim_ci95) = metric(&own, |r| Some(r.ssim));
+            let (ff_mean, ff_se, ff_ci95) = metric(&own, |r| Some(r.firefly_pixels as f64));
+            let (bias_mean, bias_se, bias_ci95) = metric(&own, |r| r.mean_bias_relative);
+            let (nfor_s_mean, _, _) = metric(&own, |r| r.nfor_s);
+            let (mp_mean, mp_se, mp_ci95) = metric(&own, |r| r.nfor_s_per_megapixel);
+            Some(DenoiseCell {
+                scene: first.scene.clone(),
+                width: first.width,
+                height: first.height,
+                spp: first.spp,
+                source: first.source.clone(),
+                label: first.label.clone(),
+                variance: first.variance.clone(),
+                stage: first.stage.clone(),
+                repeats: own.len(),
+                level: LEVEL,
+                relmse_mean: relmse_mean.unwrap_or(f64::NAN),
+                relmse_se,
+                relmse_ci95,
+                ssim_mean: ssim_mean.unwrap_or(f64::NAN),
+                ssim_se,
+                ssim_ci95,
+                firefly_pixels_mean: ff_mean.unwrap_or(f64::NAN),
+                firefly_pixels_se: ff_se,
+                firefly_pixels_ci95: ff_ci95,
+                mean_bias_relative_mean: bias_mean,
+                mean_bias_relative_se: bias_se,
+                mean_bias_relative_ci95: bias_ci95,
+                nfor_s_mean,
+                nfor_s_per_megapixel_mean: mp_mean,
+                nfor_s_per_megapixel_se: mp_se,
+                nfor_s_per_megapixel_ci95: mp_ci95,
+            })
+        })
+        .collect()
+}
+
+/// Which cells of a table row are bold, given each cell's mean and interval half-width (lower
+/// is better). With intervals, only the lowest mean, and only when its interval lies wholly
+/// below every other cell's: overlapping intervals (exact ties included) bold nothing. Without
+/// any interval (one repeat), every cell equal to the lowest mean. Non-finite means are never
+/// bold and are not compared.
+pub fn clear_best(cells: &[Option<(f64, Option<f64>)>]) -> Vec<bool> {
+    let finite = |c: &Option<(f64, Option<f64>)>| c.filter(|(m, _)| m.is_finite());
+    let best = cells
+        .iter()
+        .filter_map(finite)
+        .map(|(m, _)| m)
+        .fold(f64::INFINITY, f64::min);
+    if !best.is_finite() {
+        return vec![false; cells.len()];
+    }
+    if cells.iter().filter_map(finite).all(|(_, h)| h.is_none()) {
+        return cells
+            .iter()
+            .map(|c| finite(c).is_some_and(|(m, _)| m == best))
+            .collect();
+    }
+    let Some(b) = cells
+        .iter()
+        .position(|c| finite(c).is_some_and(|(m, _)| m == best))
+    else {
+        return vec![false; cells.len()];
+    };
+    let high = |(m, h): (f64, Option<f64>)| m + h.unwrap_or(0.0);
+    let low = |(m, h): (f64, Option<f64>)| m - h.unwrap_or(0.0);
+    let top = cells[b].map_or(f64::NAN, high);
+    let clear = cells
+        .iter()
+        .enumerate()
+        .filter(|&(i, _)| i != b)
+        .filter_map(|(_, c)| finite(c))
+        .all(|c| top < low(c));
+    (0..cells.len()).map(|i| clear && i == b).collect()
+}
 
 /// NFOR's MSE estimate over seeds for one bandwidth: the ratio of the image-mean estimate to
 /// the image-mean true squared error, with a Student-t interval over the seeds.
@@ -88,12 +316,13 @@ pub fn mse_intervals(rows: &[MseRow]) -> Vec<MseInterval> {
             }
             let nf = n as f64;
             let mean = |f: &dyn Fn(&MseRow) -> f64| own.iter().map(|r| f(r)).sum::<f64>() / nf;
-            let ratio = mean(&|r| r.ratio);
-            let var = own.iter().map(|r| (r.ratio - ratio).powi(2)).sum::<f64>() / (nf - 1.0);
-            let se = (var / nf).sqrt();
-            let t = StudentsT::new(0.0, 1.0, nf - 1.0)
-                .map(|d| d.inverse_cdf(0.5 + LEVEL / 2.0))
-                .unwrap_or(f64::NAN);
+            let ratios: Vec<f64> = own.iter().map(|r| r.ratio).collect();
+            let m = mean_interval(&ratios)?;
+            let (ratio, se, half) = (
+                m.mean,
+                m.se.unwrap_or(f64::NAN),
+                m.half_width.unwrap_or(f64::NAN),
+            );
             let true_mse = mean(&|r| r.true_mse);
             let mut sorted: Vec<f64> = own.iter().map(|r| r.ratio).collect();
             sorted.sort_by(f64::total_cmp);
@@ -114,8 +343,8 @@ pub fn mse_intervals(rows: &[MseRow]) -> Vec<MseInterval> {
                 ratio,
                 ratio_median,
                 ratio_se: se,
-                ratio_low: ratio - t * se,
-                ratio_high: ratio + t * se,
+                ratio_low: ratio - half,
+                ratio_high: ratio + half,
                 level: LEVEL,
                 reference_share: mean(&|r| r.reference_variance) / true_mse,
             })
@@ -136,6 +365,7 @@ pub fn write_denoise_report(
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir.display(), &e))?;
     let rows: Vec<DenoiseRow> = results.iter().flat_map(|r| r.rows.clone()).collect();
+    let cells = denoise_cells(&rows);
     let mse: Vec<MseRow> = results.iter().flat_map(|r| r.mse.clone()).collect();
     let infos: Vec<DenoiseSceneInfo> = results.iter().map(|r| r.info.clone()).collect();
     let intervals = mse_intervals(&mse);
@@ -147,17 +377,20 @@ pub fn write_denoise_report(
         Ok(())
     };
     put("denoise.csv", &to_csv(&rows)?)?;
+    put("denoise_summary.csv", &to_csv(&cells)?)?;
     put("mse_estimates.csv", &to_csv(&mse)?)?;
     put("mse_check.csv", &to_csv(&intervals)?)?;
     put("scenes.csv", &to_csv(&infos)?)?;
     put(
         "summary.md",
-        summary_md(exp, run, &infos, &rows, &mse, &intervals).as_bytes(),
+        summary_md(exp, run, &infos, &rows, &cells, &mse, &intervals).as_bytes(),
     )?;
     let manifest = serde_json::json!({
         "experiment": exp.source,
         "quick": exp.quick,
         "seed": exp.file.seed,
+        "repeats": exp.repeats,
+        "repeat_seeds": (0..exp.repeats).map(|r| exp.repeat_seed(r)).collect::<Vec<_>>(),
         "threads": run.threads,
         "command": run.command,
         "wall_s": run.wall_s,
@@ -172,8 +405,10 @@ pub fn write_denoise_report(
         "manifest.json",
         (serde_json::to_string_pretty(&manifest).unwrap_or_default() + "\n").as_bytes(),
     )?;
-    if !rows.is_empty() {
-        written.extend(super::denoise_plots::write_plots(dir, exp, &rows, results)?);
+    if !cells.is_empty() {
+        written.extend(super::denoise_plots::write_plots(
+            dir, exp, &cells, results,
+        )?);
     }
     Ok(written)
 }
@@ -182,20 +417,37 @@ fn opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
     v.map_or_else(|| "—".to_string(), f)
 }
 
+/// `mean ± half-width` in the format `f`, or the mean alone without an interval.
+fn pm(mean: f64, half: Option<f64>, f: impl Fn(f64) -> String) -> String {
+    match half {
+        Some(h) => format!("{} ± {}", f(mean), f(h)),
+        None => f(mean),
+    }
+}
+
+/// A relMSE `mean ± half-width`: the mean to four digits, the half-width to two.
+fn pm_relmse(mean: f64, half: Option<f64>) -> String {
+    match half {
+        Some(h) => format!("{mean:.3e} ± {h:.1e}"),
+        None => format!("{mean:.3e}"),
+    }
+}
+
 fn find<'a>(
-    rows: &'a [DenoiseRow],
+    cells: &'a [DenoiseCell],
     scene: &str,
     spp: u32,
     source: &str,
     variance: &str,
-) -> Option<&'a DenoiseRow> {
-    rows.iter()
+) -> Option<&'a DenoiseCell> {
+    cells
+        .iter()
         .find(|r| r.scene == scene && r.spp == spp && r.source == source && r.variance == variance)
 }
 
-/// Distinct spp of a scene's rows, ascending.
-fn scene_spps(rows: &[DenoiseRow], scene: &str) -> Vec<u32> {
-    let mut v: Vec<u32> = rows
+/// Distinct spp of a scene's cells, ascending.
+fn scene_spps(cells: &[DenoiseCell], scene: &str) -> Vec<u32> {
+    let mut v: Vec<u32> = cells
         .iter()
         .filter(|r| r.scene == scene)
         .map(|r| r.spp)
@@ -205,11 +457,43 @@ fn scene_spps(rows: &[DenoiseRow], scene: &str) -> Vec<u32> {
     v
 }
 
+/// What the tables' `±` means, and how the best cell is chosen, for `repeats` renders.
+fn repeats_text(exp: &DenoiseExperiment) -> String {
+    let seeds = (0..exp.repeats.min(3))
+        .map(|r| exp.repeat_seed(r).to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
+    if exp.repeats < 2 {
+        format!(
+            "One render per scene and sample count (repeats = 1, seed {seeds}): every number \
+             below comes from a single render and has no interval (the `_se` and `_ci95` \
+             columns of `denoise_summary.csv` are empty). Set `repeats` to 2 or more to see \
+             which differences are larger than the render-to-render noise."
+        )
+    } else {
+        format!(
+            "Each cell is the mean over {} independent renders (repeats; seeds {seeds}{}, i.e. \
+             seed + r·2³², apart from the MSE check's) with its {:.0}% Student-t interval, \
+             written `mean ± half-width` (t quantile with {} degrees of freedom times the \
+             standard error of the mean). Every repeat is judged against the same reference, so \
+             the interval holds the renders' noise only: the reference's own noise is common to \
+             all repeats and shifts every cell of a scene alike (its size is the relMSE floor in \
+             the last table). The interval is symmetric: on heavy-tailed cells its lower end can \
+             fall below zero. The sources of one repeat share its render.",
+            exp.repeats,
+            if exp.repeats > 3 { ", …" } else { "" },
+            100.0 * LEVEL,
+            exp.repeats - 1,
+        )
+    }
+}
+
 fn summary_md(
     exp: &DenoiseExperiment,
     run: &RunInfo,
     infos: &[DenoiseSceneInfo],
     rows: &[DenoiseRow],
+    cells: &[DenoiseCell],
     mse: &[MseRow],
     intervals: &[MseInterval],
 ) -> String {
@@ -223,22 +507,31 @@ fn summary_md(
     );
     let _ = writeln!(
         s,
-        "`{}` — {:.0} s wall on {} threads; commit {}. Per scene and sample count, one render \
-         with NFOR's half buffers runs every source's estimator on the whole stream and on each \
-         half (even and odd samples); NFOR (Bitterli et al. 2016, the paper's parameters) \
-         denoises each source's halves with each variance. Every image is judged against the \
-         scene's converged reference (the mean of its own samples, another seed). Firefly \
-         pixels: luminance above {} × the reference's + {}. Files: `denoise.csv` (one row per \
-         scene, spp, source, variance and stage; the noisy rows have no variance), \
-         `mse_estimates.csv`, `mse_check.csv`, `scenes.csv`, `manifest.json` and the figures at \
-         the end.\n",
+        "`{}` — {:.0} s wall on {} threads; commit {}. Per scene and sample count, {} with \
+         NFOR's half buffers {} every source's estimator on the whole stream and on each half \
+         (even and odd samples); NFOR (Bitterli et al. 2016, the paper's parameters) denoises \
+         each source's halves with each variance. Every image is judged against the scene's \
+         converged reference (the mean of its own samples, another seed). Firefly pixels: \
+         luminance above {} × the reference's + {}. Files: `denoise.csv` (one row per scene, \
+         spp, repeat, source, variance and stage; the noisy rows have no variance), \
+         `denoise_summary.csv` (per cell the mean over repeats with its standard error and \
+         95% interval half-width, `<metric>_mean`, `<metric>_se`, `<metric>_ci95`), \
+         `mse_estimates.csv`, `mse_check.csv`, `scenes.csv`, `manifest.json` and the figures \
+         at the end.\n",
         run.command,
         run.wall_s,
         run.threads,
         crate::report::tables::git_commit().unwrap_or_else(|| "unknown".into()),
+        if exp.repeats == 1 {
+            "one render".to_string()
+        } else {
+            format!("{} independent renders", exp.repeats)
+        },
+        if exp.repeats == 1 { "runs" } else { "each run" },
         exp.rule.factor(),
         exp.rule.floor(),
     );
+    let _ = writeln!(s, "{}\n", repeats_text(exp));
 
     // Columns of the headline table: per source its noisy estimate, then NFOR per variance.
     let mut columns: Vec<(String, String, String)> = Vec::new();
@@ -260,8 +553,22 @@ fn summary_md(
     s.push_str(
         "relMSE = mean over pixels and channels of (x − r)² / (r² + 0.01), linear radiance; \
          lower is better. In brackets after an NFOR cell: how many times lower than the same \
-         source's noisy estimate. The best cell of a row is bold.\n\n| scene | spp |",
+         source's noisy estimate (ratio of the means). ",
     );
+    if exp.repeats < 2 {
+        s.push_str(
+            "The lowest cell of a row is bold (all of them on an exact tie); with one render \
+             per cell, a bold cell may win by noise alone.\n\n| scene | spp |",
+        );
+    } else {
+        s.push_str(
+            "A cell is bold only when it has the lowest mean of its row and its interval lies \
+             wholly below every other cell's; a row without a bold cell has no clear winner at \
+             this number of repeats (exact ties, such as G-MoN at 4 spp, where it equals the \
+             mean, count as overlapping). Non-overlap of two 95% intervals is a conservative \
+             test of a difference.\n\n| scene | spp |",
+        );
+    }
     for (_, _, title) in &columns {
         let _ = write!(s, " {title} |");
     }
@@ -271,28 +578,28 @@ fn summary_md(
     }
     s.push('\n');
     for info in infos {
-        for spp in scene_spps(rows, &info.scene) {
-            let cells: Vec<Option<&DenoiseRow>> = columns
+        for spp in scene_spps(cells, &info.scene) {
+            let row: Vec<Option<&DenoiseCell>> = columns
                 .iter()
-                .map(|(src, var, _)| find(rows, &info.scene, spp, src, var))
+                .map(|(src, var, _)| find(cells, &info.scene, spp, src, var))
                 .collect();
-            let best = cells
-                .iter()
-                .flatten()
-                .map(|r| r.relmse)
-                .fold(f64::INFINITY, f64::min);
+            let bold = clear_best(
+                &row.iter()
+                    .map(|c| c.map(|c| (c.relmse_mean, c.relmse_ci95)))
+                    .collect::<Vec<_>>(),
+            );
             let _ = write!(s, "| {} | {spp} |", info.scene);
-            for (c, (src, var, _)) in cells.iter().zip(&columns) {
+            for ((c, (src, var, _)), bold) in row.iter().zip(&columns).zip(bold) {
                 match c {
                     Some(r) => {
-                        let mut cell = format!("{:.3e}", r.relmse);
-                        if r.relmse == best {
+                        let mut cell = pm_relmse(r.relmse_mean, r.relmse_ci95);
+                        if bold {
                             cell = format!("**{cell}**");
                         }
                         if !var.is_empty()
-                            && let Some(n) = find(rows, &info.scene, spp, src, "")
+                            && let Some(n) = find(cells, &info.scene, spp, src, "")
                         {
-                            let _ = write!(cell, " ({:.1}×)", n.relmse / r.relmse);
+                            let _ = write!(cell, " ({:.1}×)", n.relmse_mean / r.relmse_mean);
                         }
                         let _ = write!(s, " {cell} |");
                     }
@@ -308,8 +615,17 @@ fn summary_md(
     s.push_str(
         "relMSE as above; SSIM of the display luma (higher is better); firefly pixels by the \
          rule above; relative bias = image-mean luminance over the reference's, minus 1; NFOR \
-         wall seconds and seconds per megapixel.\n\n",
+         wall seconds and seconds per megapixel.",
     );
+    if exp.repeats >= 2 {
+        let _ = write!(
+            s,
+            " Means over the {} repeats, after ± the half-width of their 95% interval (NFOR s: \
+             the mean only).",
+            exp.repeats
+        );
+    }
+    s.push_str("\n\n");
     for info in infos {
         let _ = writeln!(
             s,
@@ -328,10 +644,10 @@ fn summary_md(
             "| spp | source | variance | stage | relMSE | SSIM | firefly px | rel. bias | NFOR s | NFOR s/MP |\n\
              |---:|---|---|---|---:|---:|---:|---:|---:|---:|\n",
         );
-        for r in rows.iter().filter(|r| r.scene == info.scene) {
+        for r in cells.iter().filter(|r| r.scene == info.scene) {
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {:.3e} | {:.4} | {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 r.spp,
                 r.label,
                 if r.variance.is_empty() {
@@ -340,12 +656,27 @@ fn summary_md(
                     &r.variance
                 },
                 r.stage,
-                r.relmse,
-                r.ssim,
-                r.firefly_pixels,
-                opt(r.mean_bias_relative, |v| format!("{:+.2}%", 100.0 * v)),
-                opt(r.nfor_s, |v| format!("{v:.2}")),
-                opt(r.nfor_s_per_megapixel, |v| format!("{v:.1}")),
+                pm_relmse(r.relmse_mean, r.relmse_ci95),
+                pm(r.ssim_mean, r.ssim_ci95, |v| format!("{v:.4}")),
+                if r.repeats < 2 {
+                    format!("{}", r.firefly_pixels_mean)
+                } else {
+                    pm(r.firefly_pixels_mean, r.firefly_pixels_ci95, |v| {
+                        format!("{v:.1}")
+                    })
+                },
+                opt(r.mean_bias_relative_mean, |v| {
+                    match r.mean_bias_relative_ci95 {
+                        Some(h) => format!("{:+.2}% ± {:.2}%", 100.0 * v, 100.0 * h),
+                        None => format!("{:+.2}%", 100.0 * v),
+                    }
+                }),
+                opt(r.nfor_s_mean, |v| format!("{v:.2}")),
+                opt(r.nfor_s_per_megapixel_mean, |v| pm(
+                    v,
+                    r.nfor_s_per_megapixel_ci95,
+                    |x| format!("{x:.1}")
+                )),
             );
         }
         s.push('\n');
@@ -404,9 +735,15 @@ fn summary_md(
         }
         s.push('\n');
     }
-    s.push_str(
-        "The same ratio on every render of the grid (one seed each; `mse_estimates.csv`), per \
-         bandwidth k in the order NFOR tries them:\n\n| scene | source | variance |",
+    let _ = write!(
+        s,
+        "The same ratio on the grid's renders (`mse_estimates.csv`), {}, per bandwidth k in the \
+         order NFOR tries them:\n\n| scene | source | variance |",
+        if exp.repeats < 2 {
+            "one render each".to_string()
+        } else {
+            format!("the mean over its {} repeats", exp.repeats)
+        }
     );
     let all_spps: Vec<u32> = {
         let mut v: Vec<u32> = rows.iter().map(|r| r.spp).collect();
@@ -432,7 +769,7 @@ fn summary_md(
     for (scene, source, variance) in keys {
         let _ = write!(s, "| {scene} | {source} | {variance} |");
         for &spp in &all_spps {
-            let ratios: Vec<String> = mse
+            let own: Vec<&MseRow> = mse
                 .iter()
                 .filter(|m| {
                     m.study == "grid"
@@ -441,7 +778,23 @@ fn summary_md(
                         && m.variance == variance
                         && m.spp == spp
                 })
-                .map(|m| format!("{:.2}", m.ratio))
+                .collect();
+            let mut ks: Vec<f64> = Vec::new();
+            for m in &own {
+                if !ks.iter().any(|k| k.to_bits() == m.k.to_bits()) {
+                    ks.push(m.k);
+                }
+            }
+            let ratios: Vec<String> = ks
+                .iter()
+                .filter_map(|k| {
+                    let v: Vec<f64> = own
+                        .iter()
+                        .filter(|m| m.k.to_bits() == k.to_bits())
+                        .map(|m| m.ratio)
+                        .collect();
+                    mean_interval(&v).map(|m| format!("{:.2}", m.mean))
+                })
                 .collect();
             if ratios.is_empty() {
                 s.push_str(" — |");
@@ -523,12 +876,26 @@ fn summary_md(
             "the process's peak so far: this system would not reset it"
         }
     );
-    s.push_str(
+    let _ = write!(
+        s,
         "## Figures\n\n\
          - `relmse_vs_spp.png`, `ssim_vs_spp.png`: per scene against spp; one colour per \
-         source, dashed its noisy estimate, solid NFOR's output.\n\
+         source, dashed its noisy estimate, solid NFOR's output{}.\n\
          - `montage.png`: per scene, the crop holding the most firefly pixels of the noisy mean, \
-         for the reference, every noisy estimate and every NFOR output.\n",
+         for the reference, every noisy estimate and every NFOR output, from the first repeat \
+         (seed {}).\n",
+        if exp.repeats < 2 {
+            String::new()
+        } else {
+            format!(
+                "; each line is the mean over the {} repeats and its shaded band (an error bar \
+                 where a series has one point) the 95% Student-t interval of that mean, cut at \
+                 SSIM's range [−1, 1]; on the log relMSE axis a band whose lower end is at or \
+                 below zero runs down to the panel's floor",
+                exp.repeats
+            )
+        },
+        exp.repeat_seed(0),
     );
     s
 }

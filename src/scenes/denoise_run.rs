@@ -24,8 +24,8 @@ pub const NOISY: &str = "noisy";
 /// See [`NOISY`].
 pub const DENOISED: &str = "denoised";
 
-/// One row of `denoise.csv`: an image of one scene, spp and source, noisy or denoised (with
-/// the variance NFOR was given; empty for the noisy estimate, which has none).
+/// One row of `denoise.csv`: an image of one scene, spp, repeat and source, noisy or denoised
+/// (with the variance NFOR was given; empty for the noisy estimate, which has none).
 #[derive(Debug, Clone, Serialize)]
 pub struct DenoiseRow {
     /// Scene name.
@@ -36,6 +36,10 @@ pub struct DenoiseRow {
     pub height: u32,
     /// Samples per pixel of the render.
     pub spp: u32,
+    /// Which render of this scene and spp (from 0; every source of a repeat comes from it).
+    pub repeat: u32,
+    /// Its seed.
+    pub seed: u64,
     /// The source's estimator spec (`mean`, `gmon:M=5`).
     pub source: String,
     /// Its short label.
@@ -84,7 +88,7 @@ pub struct DenoiseRow {
 /// squared error of that candidate against the reference.
 #[derive(Debug, Clone, Serialize)]
 pub struct MseRow {
-    /// `grid` (the experiment's renders, one seed each) or `seeds` (the MSE check).
+    /// `grid` (the experiment's renders, one seed per repeat) or `seeds` (the MSE check).
     pub study: String,
     /// Scene name.
     pub scene: String,
@@ -132,7 +136,7 @@ pub struct DenoiseSceneInfo {
     pub reference_variance: Option<f64>,
     /// Wall seconds spent tracing the reference in this run.
     pub reference_wall_s: f64,
-    /// Wall seconds of the renders, all counts.
+    /// Wall seconds of the renders, all counts and repeats.
     pub render_wall_s: f64,
     /// Wall seconds of every NFOR run of the scene (grid and MSE check).
     pub nfor_wall_s: f64,
@@ -145,7 +149,7 @@ pub struct DenoiseSceneInfo {
 pub struct DenoiseSceneResult {
     /// Size, reference and timings.
     pub info: DenoiseSceneInfo,
-    /// One row per spp, source and stage (and variance, for NFOR).
+    /// One row per spp, repeat, source and stage (and variance, for NFOR).
     pub rows: Vec<DenoiseRow>,
     /// NFOR's MSE estimate against the truth, per run and bandwidth.
     pub mse: Vec<MseRow>,
@@ -153,8 +157,8 @@ pub struct DenoiseSceneResult {
     pub reference: Image,
     /// The montage's crop `[x, y, size]`.
     pub crop: [u32; 3],
-    /// Labelled images at the montage's spp: per source the noisy estimate, then NFOR's output
-    /// per variance.
+    /// Labelled images at the montage's spp, first repeat: per source the noisy estimate, then
+    /// NFOR's output per variance.
     pub montage: Vec<(String, Image)>,
 }
 
@@ -277,8 +281,8 @@ fn mse_rows(key: &RunKey, run: &NforRun, reference_variance: f64) -> Vec<MseRow>
         .collect()
 }
 
-/// Runs one scene on the current rayon pool: reference, a render per spp, NFOR per source and
-/// variance, metrics; and the MSE check when the experiment names this scene.
+/// Runs one scene on the current rayon pool: reference, `repeats` renders per spp, NFOR per
+/// render, source and variance, metrics; and the MSE check when the experiment names this scene.
 ///
 /// # Errors
 ///
@@ -303,15 +307,22 @@ pub fn run_denoise_scene(
     let (mut rows, mut mse, mut montage) = (Vec::new(), Vec::new(), Vec::new());
     let (mut render_wall, mut nfor_wall) = (0.0, 0.0);
     let mut crop_probe: Option<Image> = None;
-    for &spp in spps {
+    for (&spp, repeat) in spps
+        .iter()
+        .flat_map(|spp| (0..exp.repeats).map(move |r| (spp, r)))
+    {
+        let seed = exp.repeat_seed(repeat);
         log(format!(
-            "{}: rendering {}x{} at {spp} spp with NFOR buffers and {} estimators",
+            "{}: rendering {}x{} at {spp} spp (repeat {}/{}, seed {seed}) with NFOR buffers and \
+             {} estimators",
             scene.name,
             scene.width,
             scene.height,
+            repeat + 1,
+            exp.repeats,
             exp.sources.len()
         ));
-        let (out, buffers, wall) = render(exp, &world, spp, exp.file.seed, memory)?;
+        let (out, buffers, wall) = render(exp, &world, spp, seed, memory)?;
         render_wall += wall;
         let row = |source: &super::denoise_experiment::Source,
                    variance: &str,
@@ -321,6 +332,8 @@ pub fn run_denoise_scene(
             width: scene.width,
             height: scene.height,
             spp,
+            repeat,
+            seed,
             source: source.spec.to_string(),
             label: source.label.clone(),
             variance: variance.into(),
@@ -355,7 +368,8 @@ pub fn run_denoise_scene(
             let m = Metrics::compute(noisy, &ref_image, exp.rule)?;
             let noisy_relmse = m.relmse;
             rows.push(row(source, "", NOISY, &m));
-            let at_montage = spp == exp.montage_spp;
+            // The montage and its crop show the first repeat.
+            let at_montage = spp == exp.montage_spp && repeat == 0;
             if at_montage {
                 montage.push((source.label.clone(), noisy.clone()));
                 if source.color == ColorSource::Mean || crop_probe.is_none() {
@@ -367,9 +381,10 @@ pub fn run_denoise_scene(
                 nfor_wall += run.seconds;
                 let m = Metrics::compute(&run.image, &ref_image, exp.rule)?;
                 log(format!(
-                    "{}: {spp} spp, {} with {} variance: relMSE {:.3e} noisy -> {:.3e} NFOR \
-                     ({:.2} s)",
+                    "{}: {spp} spp, repeat {}, {} with {} variance: relMSE {:.3e} noisy -> \
+                     {:.3e} NFOR ({:.2} s)",
                     scene.name,
+                    repeat + 1,
                     source.label,
                     variance_name(v),
                     noisy_relmse,
@@ -391,7 +406,7 @@ pub fn run_denoise_scene(
                     spp,
                     source: source.spec.to_string(),
                     variance: v,
-                    seed: exp.file.seed,
+                    seed,
                 };
                 mse.extend(mse_rows(&key, &run, reference_variance));
                 rows.push(r);
