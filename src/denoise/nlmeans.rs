@@ -26,6 +26,7 @@
 //! never a weight per pixel and offset of the whole image.
 
 use super::planes::Planes;
+use super::simd::vectorized;
 use crate::error::{Error, Result};
 use rayon::prelude::*;
 
@@ -115,6 +116,7 @@ pub(crate) fn tiles(width: usize, height: usize) -> Vec<Rect> {
 }
 
 /// `[lo, hi)` of coordinates `a` with both `a` and `a + d` in `[0, n)`.
+#[inline(always)]
 fn valid_range(n: usize, d: isize) -> (usize, usize) {
     let lo = (-d).max(0) as usize;
     let hi = (n as isize - d).clamp(0, n as isize) as usize;
@@ -145,6 +147,7 @@ pub(crate) struct Guide<'a> {
 /// partner is missing, so that the patch sums are plain shifted additions (which vectorise);
 /// the count of pixels that did exist divides them.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 pub(crate) fn patch_distances(
     guide: Guide<'_>,
     rect: Rect,
@@ -228,7 +231,7 @@ pub(crate) fn patch_distances(
 
 /// The weight of a patch distance, `exp(−max(0, D))`; 0 for an absent partner (`D = +∞`)
 /// and wherever the weight would be below `f32`'s normal range.
-#[inline]
+#[inline(always)]
 pub(crate) fn weight(distance: f32) -> f32 {
     if distance >= 87.0 {
         0.0
@@ -241,7 +244,7 @@ pub(crate) fn weight(distance: f32) -> f32 {
 /// r` with `n` an integer (Cody and Waite's two-part ln 2 keeps `r` exact), `eʳ` from a
 /// degree-6 Taylor series about −ln2/2, and `2ⁿ` built in the exponent bits. Relative error
 /// below 10⁻⁶ (tested against `f64::exp` over the whole domain).
-#[inline]
+#[inline(always)]
 pub(crate) fn exp_neg(x: f32) -> f32 {
     const LN2_HI: f32 = 0.693_359_4;
     const LN2_LO: f32 = -2.121_944_4e-4;
@@ -294,89 +297,21 @@ pub fn nl_means_many(
         }
     }
     let (w, h) = (guide.width(), guide.height());
-    let r = params.window_radius as isize;
     let tiles = tiles(w, h);
     let n_img = images.len();
     // Per tile: per channel, per image, the filtered tile.
     let blocks: Vec<Vec<Vec<Vec<f32>>>> = tiles
         .par_iter()
-        .map_init(
-            || {
-                (
-                    Scratch::default(),
-                    vec![0.0f32; TILE * TILE],
-                    vec![0.0f32; TILE * TILE],
-                )
-            },
-            |(scratch, dist, wts), &rect| {
-                let area = rect.area();
-                (0..guide.channels())
-                    .map(|c| {
-                        let g = Guide {
-                            value: guide.plane(c),
-                            var: var.plane(c),
-                            width: w,
-                            height: h,
-                        };
-                        let mut acc = vec![vec![0.0f32; area]; n_img];
-                        let mut wsum = vec![0.0f32; area];
-                        for dy in -r..=r {
-                            for dx in -r..=r {
-                                patch_distances(
-                                    g,
-                                    rect,
-                                    dx,
-                                    dy,
-                                    params.patch_radius,
-                                    params.k,
-                                    scratch,
-                                    dist,
-                                );
-                                for (wt, &d) in wts[..area].iter_mut().zip(&dist[..area]) {
-                                    *wt = weight(d);
-                                }
-                                if dx == 0 && dy == 0 {
-                                    wts[..area]
-                                        .iter_mut()
-                                        .for_each(|v| *v = v.max(MIN_CENTER_WEIGHT));
-                                }
-                                for (s, wt) in wsum.iter_mut().zip(&wts[..area]) {
-                                    *s += wt;
-                                }
-                                // Rows of the tile whose partners lie in the image.
-                                let (vx0, vx1) = valid_range(w, dx);
-                                let (vy0, vy1) = valid_range(h, dy);
-                                let (x0, x1) = (rect.x0.max(vx0), rect.x1.min(vx1));
-                                if x0 >= x1 {
-                                    continue;
-                                }
-                                for y in rect.y0.max(vy0)..rect.y1.min(vy1) {
-                                    let i0 = (y - rect.y0) * rect.width() + (x0 - rect.x0);
-                                    let q0 = ((y as isize + dy) as usize) * w
-                                        + (x0 as isize + dx) as usize;
-                                    let n = x1 - x0;
-                                    let wrow = &wts[i0..i0 + n];
-                                    for (a, image) in acc.iter_mut().zip(images) {
-                                        let src = &image.plane(c)[q0..q0 + n];
-                                        for ((o, wt), v) in
-                                            a[i0..i0 + n].iter_mut().zip(wrow).zip(src)
-                                        {
-                                            *o += wt * v;
-                                        }
-                                    }
-                                }
-                            }
-                        }
-                        for a in &mut acc {
-                            for (v, s) in a.iter_mut().zip(&wsum) {
-                                *v /= s;
-                            }
-                        }
-                        acc
-                    })
-                    .collect()
-            },
-        )
+        .map_init(TileBuffers::default, |buffers, &rect| {
+            vectorized(FilterTile {
+                images,
+                guide,
+                var,
+                params,
+                rect,
+                buffers,
+            })
+        })
         .collect();
     let mut out = vec![Planes::zeros(w, h, guide.channels()); n_img];
     for (rect, block) in tiles.iter().zip(blocks) {
@@ -391,6 +326,110 @@ pub fn nl_means_many(
         }
     }
     Ok(out)
+}
+
+/// Per-thread scratch of [`nl_means_many`].
+#[derive(Default)]
+struct TileBuffers {
+    scratch: Scratch,
+    dist: Vec<f32>,
+    wts: Vec<f32>,
+}
+
+/// [`nl_means_many`] on one tile: per channel, per image, the filtered tile. A job for
+/// [`vectorized`], so that its loops are compiled for the CPU's widest vector units.
+struct FilterTile<'a> {
+    images: &'a [&'a Planes],
+    guide: &'a Planes,
+    var: &'a Planes,
+    params: NlMeansParams,
+    rect: Rect,
+    buffers: &'a mut TileBuffers,
+}
+
+impl pulp::WithSimd for FilterTile<'_> {
+    type Output = Vec<Vec<Vec<f32>>>;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> Self::Output {
+        let FilterTile {
+            images,
+            guide,
+            var,
+            params,
+            rect,
+            buffers,
+        } = self;
+        let TileBuffers { scratch, dist, wts } = buffers;
+        dist.resize(TILE * TILE, 0.0);
+        wts.resize(TILE * TILE, 0.0);
+        let (w, h) = (guide.width(), guide.height());
+        let r = params.window_radius as isize;
+        let n_img = images.len();
+        let area = rect.area();
+        (0..guide.channels())
+            .map(|c| {
+                let g = Guide {
+                    value: guide.plane(c),
+                    var: var.plane(c),
+                    width: w,
+                    height: h,
+                };
+                let mut acc = vec![vec![0.0f32; area]; n_img];
+                let mut wsum = vec![0.0f32; area];
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        patch_distances(
+                            g,
+                            rect,
+                            dx,
+                            dy,
+                            params.patch_radius,
+                            params.k,
+                            scratch,
+                            dist,
+                        );
+                        for (wt, &d) in wts[..area].iter_mut().zip(&dist[..area]) {
+                            *wt = weight(d);
+                        }
+                        if dx == 0 && dy == 0 {
+                            wts[..area]
+                                .iter_mut()
+                                .for_each(|v| *v = v.max(MIN_CENTER_WEIGHT));
+                        }
+                        for (s, wt) in wsum.iter_mut().zip(&wts[..area]) {
+                            *s += wt;
+                        }
+                        // Rows of the tile whose partners lie in the image.
+                        let (vx0, vx1) = valid_range(w, dx);
+                        let (vy0, vy1) = valid_range(h, dy);
+                        let (x0, x1) = (rect.x0.max(vx0), rect.x1.min(vx1));
+                        if x0 >= x1 {
+                            continue;
+                        }
+                        for y in rect.y0.max(vy0)..rect.y1.min(vy1) {
+                            let i0 = (y - rect.y0) * rect.width() + (x0 - rect.x0);
+                            let q0 = ((y as isize + dy) as usize) * w + (x0 as isize + dx) as usize;
+                            let n = x1 - x0;
+                            let wrow = &wts[i0..i0 + n];
+                            for (a, image) in acc.iter_mut().zip(images) {
+                                let src = &image.plane(c)[q0..q0 + n];
+                                for ((o, wt), v) in a[i0..i0 + n].iter_mut().zip(wrow).zip(src) {
+                                    *o += wt * v;
+                                }
+                            }
+                        }
+                    }
+                }
+                for a in &mut acc {
+                    for (v, s) in a.iter_mut().zip(&wsum) {
+                        *v /= s;
+                    }
+                }
+                acc
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]

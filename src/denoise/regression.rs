@@ -26,6 +26,7 @@ use super::nlmeans::{
     Guide, MIN_CENTER_WEIGHT, NlMeansParams, Rect, Scratch, TILE, patch_distances, tiles, weight,
 };
 use super::planes::Planes;
+use super::simd::vectorized;
 use crate::error::{Error, Result};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -94,7 +95,13 @@ pub fn collaborative_regression(
     for band in all.chunk_by(|a, b| a.y0 == b.y0) {
         let sums: Vec<Vec<TileSum>> = band
             .par_iter()
-            .map_init(Workspace::default, |ws, &rect| ws.tile(&problem, rect))
+            .map_init(Workspace::default, |ws, &rect| {
+                vectorized(RegressTile {
+                    ws,
+                    problem: &problem,
+                    rect,
+                })
+            })
             .collect();
         for per_k in sums {
             for ((s, acc), wsum) in per_k.into_iter().zip(&mut acc).zip(&mut wsum) {
@@ -154,6 +161,23 @@ struct Workspace {
     used: usize,
 }
 
+/// One tile of the regression: a job for [`vectorized`], so that its loops are compiled for
+/// the CPU's widest vector units.
+struct RegressTile<'a> {
+    ws: &'a mut Workspace,
+    problem: &'a Problem<'a>,
+    rect: Rect,
+}
+
+impl pulp::WithSimd for RegressTile<'_> {
+    type Output = Vec<TileSum>;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> Self::Output {
+        self.ws.tile(self.problem, self.rect)
+    }
+}
+
 /// The inputs of one [`collaborative_regression`], checked.
 struct Problem<'a> {
     image: &'a Planes,
@@ -165,6 +189,7 @@ struct Problem<'a> {
 }
 
 /// `Σ aᵢbᵢ` with eight running sums, so that the loop vectorises.
+#[inline(always)]
 fn dot(a: &[f32], b: &[f32]) -> f32 {
     let mut acc = [0.0f32; 8];
     let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
@@ -183,6 +208,7 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 }
 
 impl Workspace {
+    #[inline(always)]
     fn tile(&mut self, problem: &Problem<'_>, rect: Rect) -> Vec<TileSum> {
         let Problem {
             image,
@@ -259,6 +285,7 @@ impl Workspace {
     /// Collects the window of centre `(x, y)`, row by row: patch distances (from the centre's
     /// distances to every offset, `dists`), colours and the normalised design columns,
     /// constant first; columns constant in the window are dropped ([`Self::used`] are kept).
+    #[inline(always)]
     fn gather(
         &mut self,
         image: &Planes,
@@ -324,15 +351,18 @@ impl Workspace {
 
     /// Solves the weighted least squares of the gathered window for every bandwidth and adds
     /// each prediction, weighted, to that bandwidth's sum.
+    #[inline(always)]
     fn solve_and_spread(&mut self, bandwidths: &[f32], sums: &mut [TileSum]) {
         let (d, n, nk) = (self.used, self.dwin.len(), bandwidths.len());
-        self.ws.clear();
-        for &k in bandwidths {
+        // Plain indexed loops here and below: iterator adapters such as `extend` are not
+        // inlined into the vectorised job and would run with baseline instructions.
+        self.ws.resize(nk * n, 0.0);
+        for (wk, &k) in self.ws.chunks_exact_mut(n).zip(bandwidths) {
             let scale = 1.0 / (k * k);
-            let at = self.ws.len();
-            self.ws.extend(self.dwin.iter().map(|&v| weight(v * scale)));
-            let c = &mut self.ws[at + self.centre];
-            *c = c.max(MIN_CENTER_WEIGHT);
+            for (o, &v) in wk.iter_mut().zip(&self.dwin) {
+                *o = weight(v * scale);
+            }
+            wk[self.centre] = wk[self.centre].max(MIN_CENTER_WEIGHT);
         }
         // W·X and W·Y of every bandwidth, then each moment as one dot product with X.
         let block = d + 3;
@@ -365,9 +395,12 @@ impl Workspace {
                     gram[(i, i)] += RIDGE * wsum;
                 }
             }
-            let rhs = DMatrix::<f64>::from_fn(d, 3, |i, c| {
-                f64::from(dot(x(i), &wz[(d + c) * n..(d + c + 1) * n]))
-            });
+            let mut rhs = DMatrix::<f64>::zeros(d, 3);
+            for c in 0..3 {
+                for i in 0..d {
+                    rhs[(i, c)] = f64::from(dot(x(i), &wz[(d + c) * n..(d + c + 1) * n]));
+                }
+            }
             let beta = match gram.cholesky() {
                 Some(ch) => ch.solve(&rhs),
                 None => {
