@@ -791,8 +791,9 @@ fn a_quick_cbox_run_writes_its_report_and_nfor_helps_the_mean() {
     );
     assert!(summary.contains(" ± "), "{summary}");
     assert!(
-        summary.contains("Paired ratios against the mean")
-            && summary.contains("### After NFOR: against NFOR of the mean (halves variance)")
+        summary.contains(
+            "## Does a robust estimator help? Paired ratios against the mean\n\nEach source"
+        ) && summary.contains("### After NFOR: against NFOR of the mean (halves variance)")
             && summary.contains("### Before NFOR: noisy estimates against the noisy mean")
             && summary.contains("In short, against NFOR of the mean (halves variance): "),
         "{summary}"

@@ -425,11 +425,13 @@ fn scene_spps(cells: &[DenoiseCell], scene: &str) -> Vec<u32> {
 /// large.
 fn fmt_ratio(v: f64) -> String {
     let a = v.abs();
-    if (10.0..1000.0).contains(&a) {
+    if (100.0..10000.0).contains(&a) {
+        format!("{v:.0}")
+    } else if (10.0..100.0).contains(&a) {
         format!("{v:.1}")
     } else if (0.1..10.0).contains(&a) {
         format!("{v:.2}")
-    } else if (0.001..0.1).contains(&a) {
+    } else if (0.01..0.1).contains(&a) {
         format!("{v:.3}")
     } else {
         format!("{v:.1e}")
@@ -475,12 +477,32 @@ fn paired_md(s: &mut String, exp: &DenoiseExperiment, paired: &[PairedRow]) {
     let base_var = first.variances.first().map_or("", |&v| variance_name(v));
     let _ = writeln!(
         s,
-        "## Does a robust estimator help? Paired ratios against the mean
-
-         Each source is compared with a baseline on the same renders. After NFOR, the baseline          is NFOR of the {b} with {base_var} variance (the experiment file's first source and          its first variance); every other source and variance after NFOR is compared with it.          Before NFOR, the baseline is the {b}'s noisy estimate: does the robust estimator help          before any denoising? All sources of one repeat are computed from the same render (the          same samples, split into the same halves), so the render's luck moves them together;          per repeat r the ratio relMSE(source, r) / relMSE(baseline, r) cancels most of it,          where separate intervals per cell would keep it. A cell is the geometric mean of that          ratio over the repeats, exp(mean of the log-ratios), below 1 when the source has the          lower relMSE, with its {lvl:.0}% interval exp(mean ± t · se): se is the standard          error of the mean log-ratio and t Student's quantile with repeats − 1 degrees of          freedom ({t_text}). The interval assumes independent repeats and log-ratios roughly          normal over them; a ratio of heavy-tailed relMSEs is far closer to that on the log          scale, where halving and doubling are symmetric.
-
-         Verdict: **helps** when the whole interval lies below 1, **hurts** when it lies above          1, **undecided** when it holds 1, **same** when every repeat's relMSE is exactly the          baseline's (as with G-MoN at two samples per half, where it equals the mean and NFOR          gets the same input), **n/a** with fewer than two usable pairs (no interval). A pair          with a relMSE that is zero or not finite on either side has no log-ratio: it is left          out and counted in the `skipped` column of `denoise_paired.csv` (and in the cell){skipped}.          Both sides are judged against the same reference, whose own noise adds the same floor          to both relMSEs and pulls the ratio towards 1. Each verdict is at {lvl:.0}% for its          own cell; over all cells of a stage some would be decided by chance, so a **bold**          cell's verdict also holds after Holm's correction over every cell of its stage          (`p_holm`, `verdict_holm` in `denoise_paired.csv`).
-",
+        "## Does a robust estimator help? Paired ratios against the {b}\n\n\
+         Each source is compared with a baseline on the same renders. After NFOR, the baseline \
+         is NFOR of the {b} with {base_var} variance (the experiment file's first source and \
+         its first variance); every other source and variance after NFOR is compared with it. \
+         Before NFOR, the baseline is the {b}'s noisy estimate: does the robust estimator help \
+         before any denoising? All sources of one repeat are computed from the same render (the \
+         same samples, split into the same halves), so the render's luck moves them together; \
+         per repeat r the ratio relMSE(source, r) / relMSE(baseline, r) cancels most of it, \
+         where separate intervals per cell would keep it. A cell is the geometric mean of that \
+         ratio over the repeats, exp(mean of the log-ratios), below 1 when the source has the \
+         lower relMSE, with its {lvl:.0}% interval exp(mean ± t · se): se is the standard \
+         error of the mean log-ratio and t Student's quantile with repeats − 1 degrees of \
+         freedom ({t_text}). The interval assumes independent repeats and log-ratios roughly \
+         normal over them; a ratio of heavy-tailed relMSEs is far closer to that on the log \
+         scale, where halving and doubling are symmetric.\n\n\
+         Verdict: **helps** when the whole interval lies below 1, **hurts** when it lies above \
+         1, **undecided** when it holds 1, **same** when every repeat's relMSE is exactly the \
+         baseline's (as with G-MoN at two samples per half, where it equals the mean and NFOR \
+         gets the same input), **n/a** with fewer than two usable pairs (no interval). A pair \
+         with a relMSE that is zero or not finite on either side has no log-ratio: it is left \
+         out and counted in the `skipped` column of `denoise_paired.csv` (and in the \
+         cell){skipped}. Both sides are judged against the same reference, whose own noise adds \
+         the same floor to both relMSEs and pulls the ratio towards 1. Each verdict is at \
+         {lvl:.0}% for its own cell; over all cells of a stage some would be decided by chance, \
+         so a **bold** cell's verdict also holds after Holm's correction over every cell of its \
+         stage (`p_holm`, `verdict_holm` in `denoise_paired.csv`).\n",
         b = first.label,
         lvl = 100.0 * LEVEL,
         t_text = if exp.repeats < 2 {
