@@ -1,11 +1,17 @@
 //! `fireflies denoise-experiment` (src/scenes/denoise_*.rs): the experiment file parses full and
 //! quick, bad input names the entry at fault, the mean over repeats and its Student-t interval
-//! match hand-computed values (empty with one repeat), the bold rule of the summary, and a quick
+//! match hand-computed values (empty with one repeat), so do the geometric mean's log-scale
+//! interval and the paired ratio of a source to the baseline within each render (with its
+//! verdict, the rule for zero or non-finite relMSE and Holm's correction), the bold rule of the
+//! summary, and a quick
 //! run on cbox writes one row per spp, repeat, source, variance and stage, the per-cell summary
 //! over repeats, the MSE check, the figures, and shows that NFOR lowers the relMSE of a 16-spp
 //! mean render at least twofold.
 
 use fireflies::Error;
+use fireflies::scenes::denoise_compare::{
+    Verdict, geo_interval, geo_interval_of_logs, holm, paired_comparisons, paired_ratio,
+};
 use fireflies::scenes::denoise_experiment::{DenoiseExperiment, REPEAT_SEED_STRIDE};
 use fireflies::scenes::denoise_report::{clear_best, denoise_cells, mean_interval};
 use fireflies::scenes::denoise_run::DenoiseRow;
@@ -208,6 +214,174 @@ fn mean_interval_is_the_student_t_interval_of_the_mean() {
     assert_eq!(mean_interval(&[]), None);
 }
 
+/// t(0.975, 2), from tables.
+const T2: f64 = 4.302652730;
+
+#[test]
+fn paired_ratios_are_geometric_means_with_log_t_intervals() {
+    // The same ratio 0.5 in every render, however far the renders differ: geometric mean 0.5,
+    // an interval of zero width (up to rounding of the logs' mean), helps.
+    let p = paired_ratio(&[0.5, 5.0, 50.0], &[1.0, 10.0, 100.0]);
+    let g = p.ratio.unwrap();
+    assert_eq!((p.pairs, p.skipped), (3, 0));
+    assert!((g.geomean - 0.5).abs() < 1e-12, "{p:?}");
+    assert!((g.lo.unwrap() - 0.5).abs() < 1e-12 && (g.hi.unwrap() - 0.5).abs() < 1e-12);
+    assert_eq!(p.verdict, Verdict::Helps);
+    assert!(p.p_value.unwrap() < 1e-6, "{p:?}");
+    // Twice the baseline throughout: hurts.
+    assert_eq!(
+        paired_ratio(&[4.0, 8.0], &[2.0, 4.0]).verdict,
+        Verdict::Hurts
+    );
+
+    // Log-ratios ln 0.5 and ln 2: geometric mean exactly 1 (up to rounding), undecided. se =
+    // sd/√2 = ln 2, t(0.975, 1) = 12.706204736: the interval is 2^(±12.706...).
+    let p = paired_ratio(&[0.5, 2.0], &[1.0, 1.0]);
+    let g = p.ratio.unwrap();
+    assert!((g.geomean - 1.0).abs() < 1e-12, "{p:?}");
+    assert!((g.log_se.unwrap() - 2f64.ln()).abs() < 1e-12);
+    assert!((g.hi.unwrap() - 2f64.powf(12.706204736)).abs() < 1e-6 * g.hi.unwrap());
+    assert_eq!(p.verdict, Verdict::Undecided);
+    assert!((p.p_value.unwrap() - 1.0).abs() < 1e-12);
+
+    // Ratios 0.5, 0.25, 1 (log-ratios −ln 2, −2 ln 2, 0): mean −ln 2 (geometric mean 0.5), sd
+    // ln 2, se ln 2/√3, so the interval is 0.5 · 2^(±t(0.975, 2)/√3) = [0.0895, 2.797] and the
+    // t statistic −√3; with 2 degrees of freedom P(|T| > x) = 1 − x/√(x² + 2) = 1 − √(3/5).
+    let p = paired_ratio(&[1.0, 0.5, 4.0], &[2.0, 2.0, 4.0]);
+    let g = p.ratio.unwrap();
+    assert!((g.geomean - 0.5).abs() < 1e-12, "{p:?}");
+    let w = 2f64.powf(T2 / 3f64.sqrt());
+    assert!((g.lo.unwrap() - 0.5 / w).abs() < 1e-8, "{p:?}");
+    assert!((g.hi.unwrap() - 0.5 * w).abs() < 1e-8, "{p:?}");
+    assert!((g.lo.unwrap() - 0.089_37).abs() < 1e-4 && (g.hi.unwrap() - 2.797).abs() < 1e-3);
+    assert!(
+        (p.p_value.unwrap() - (1.0 - 0.6f64.sqrt())).abs() < 1e-9,
+        "{p:?}"
+    );
+    assert_eq!(p.verdict, Verdict::Undecided);
+
+    // Every pair equal: the same, not undecided.
+    let p = paired_ratio(&[0.3, 0.7], &[0.3, 0.7]);
+    assert_eq!((p.verdict, p.p_value), (Verdict::Same, Some(1.0)));
+
+    // The rule for a relMSE with no log: a pair with a zero, negative or non-finite relMSE on
+    // either side is skipped and counted; the rest decide.
+    let p = paired_ratio(
+        &[0.5, 0.0, 1.0, f64::NAN, 2.0, 1.0],
+        &[1.0, 1.0, 2.0, 1.0, f64::INFINITY, -1.0],
+    );
+    assert_eq!((p.pairs, p.skipped), (2, 4), "{p:?}");
+    assert!((p.ratio.unwrap().geomean - 0.5).abs() < 1e-12);
+    assert_eq!(p.verdict, Verdict::Helps);
+    // One usable pair: a ratio, no interval, no verdict; none: no ratio.
+    let p = paired_ratio(&[0.5, 0.0], &[1.0, 1.0]);
+    assert_eq!((p.pairs, p.skipped, p.verdict), (1, 1, Verdict::NoInterval));
+    assert_eq!(p.ratio.unwrap().lo, None);
+    assert_eq!(p.p_value, None);
+    let p = paired_ratio(&[0.0], &[1.0]);
+    assert_eq!((p.ratio, p.verdict), (None, Verdict::NoInterval));
+
+    // The geometric interval of values is that of their logs; no log, no interval.
+    let a = geo_interval(&[1.0, 2.0, 4.0]).unwrap();
+    let b = geo_interval_of_logs(&[0.0, 2f64.ln(), 4f64.ln()]).unwrap();
+    assert!((a.geomean - 2.0).abs() < 1e-12 && (a.hi.unwrap() - b.hi.unwrap()).abs() < 1e-12);
+    assert_eq!(geo_interval(&[1.0, 0.0]), None);
+    assert_eq!(geo_interval(&[1.0, f64::NAN]), None);
+    assert_eq!(geo_interval(&[]), None);
+
+    // Holm: sorted p 0.01, 0.02, 0.5 times 3, 2, 1, kept non-decreasing.
+    let a = holm(&[Some(0.5), Some(0.01), None, Some(0.02)]);
+    let want = [Some(0.5), Some(0.03), None, Some(0.04)];
+    for (x, y) in a.iter().zip(want) {
+        assert_eq!(x.is_some(), y.is_some());
+        assert!((x.unwrap_or(0.0) - y.unwrap_or(0.0)).abs() < 1e-15, "{a:?}");
+    }
+}
+
+/// A row of one scene and spp for the paired comparison.
+fn paired_row(repeat: u32, source: &str, variance: &str, relmse: f64) -> DenoiseRow {
+    DenoiseRow {
+        source: source.into(),
+        label: source.into(),
+        ..row(repeat, variance, relmse, 0.5, 0)
+    }
+}
+
+#[test]
+fn sources_are_paired_with_the_first_source_within_each_render() {
+    // Three renders whose luck differs a hundredfold; the run's order: per repeat, per source
+    // its noisy row, then NFOR per variance. The mean with `halves` is the baseline after
+    // NFOR, the mean's noisy estimate before.
+    let luck = [1.0, 10.0, 100.0];
+    let mut rows = Vec::new();
+    for (r, &l) in luck.iter().enumerate() {
+        let r = r as u32;
+        rows.push(paired_row(r, "mean", "", 4.0 * l));
+        rows.push(paired_row(r, "mean", "halves", l));
+        rows.push(paired_row(r, "mean", "sample", 2.0 * l));
+        rows.push(paired_row(r, "gmon", "", 4.0 * l));
+        rows.push(paired_row(r, "gmon", "halves", 0.5 * l));
+    }
+    // A fourth render with no baseline row after NFOR: its G-MoN and sample rows are unpaired.
+    rows.push(paired_row(3, "mean", "", 4.0));
+    rows.push(paired_row(3, "mean", "sample", 2.0));
+    rows.push(paired_row(3, "gmon", "", 4.0));
+    rows.push(paired_row(3, "gmon", "halves", 0.5));
+    let got = paired_comparisons(&rows);
+    let keys: Vec<(&str, &str, &str, &str)> = got
+        .iter()
+        .map(|r| {
+            (
+                r.stage.as_str(),
+                r.source.as_str(),
+                r.variance.as_str(),
+                r.baseline.as_str(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        keys,
+        [
+            ("noisy", "gmon", "", "mean"),
+            ("denoised", "mean", "sample", "mean/halves"),
+            ("denoised", "gmon", "halves", "mean/halves"),
+        ]
+    );
+    let (noisy, sample, gmon) = (&got[0], &got[1], &got[2]);
+    assert_eq!((noisy.repeats, noisy.skipped), (4, 0));
+    assert_eq!(noisy.verdict, Verdict::Same);
+    assert_eq!(noisy.ratio_geomean, Some(1.0));
+    assert_eq!((gmon.repeats, gmon.skipped), (3, 1));
+    assert!(
+        (gmon.ratio_geomean.unwrap() - 0.5).abs() < 1e-12,
+        "{gmon:?}"
+    );
+    assert_eq!(gmon.verdict, Verdict::Helps);
+    assert!(
+        (sample.ratio_geomean.unwrap() - 2.0).abs() < 1e-12,
+        "{sample:?}"
+    );
+    assert_eq!(sample.verdict, Verdict::Hurts);
+    // Exact ratios leave p near 0: both hold after Holm's correction over the two.
+    assert_eq!(gmon.verdict_holm, Verdict::Helps);
+    assert_eq!(sample.verdict_holm, Verdict::Hurts);
+    assert_eq!(noisy.verdict_holm, Verdict::Same);
+    assert_eq!(gmon.level, 0.95);
+    // Unpaired, the cells' own intervals overlap widely: G-MoN's mean lies inside the
+    // baseline's interval, so only the pairing can tell them apart.
+    let cells = denoise_cells(&rows);
+    let cell = |source: &str, variance: &str| {
+        cells
+            .iter()
+            .find(|c| c.source == source && c.variance == variance)
+            .unwrap()
+    };
+    let base = cell("mean", "halves");
+    assert!(
+        (cell("gmon", "halves").relmse_mean - base.relmse_mean).abs() < base.relmse_ci95.unwrap()
+    );
+}
+
 /// A `denoise.csv` row with the given metrics; the rest fixed.
 fn row(repeat: u32, variance: &str, relmse: f64, ssim: f64, fireflies: u64) -> DenoiseRow {
     let denoised = !variance.is_empty();
@@ -253,9 +427,11 @@ fn summary_csv(rows: &[DenoiseRow]) -> (Vec<String>, Vec<Vec<String>>) {
     (head, recs)
 }
 
-const INTERVAL_COLUMNS: [&str; 10] = [
+const INTERVAL_COLUMNS: [&str; 12] = [
     "relmse_se",
     "relmse_ci95",
+    "relmse_geo_lo",
+    "relmse_geo_hi",
     "ssim_se",
     "ssim_ci95",
     "firefly_pixels_se",
@@ -293,6 +469,16 @@ fn cells_average_repeats_and_one_repeat_has_empty_intervals() {
     let half = 3.182446305 * (5.0f64 / 3.0).sqrt() / 2.0;
     assert_eq!(num(noisy, "relmse_mean"), 2.5);
     assert!((num(noisy, "relmse_ci95") - half).abs() < 1e-9);
+    // Its geometric mean 24^(1/4) with the log-scale interval: the logs 0, ln 2, ln 3, ln 4
+    // have mean ln 24 / 4 and the interval is exp(mean ± t(0.975, 3) · se), never below zero.
+    let logs = [0.0, 2f64.ln(), 3f64.ln(), 4f64.ln()];
+    let lm = 24f64.ln() / 4.0;
+    let lsd = (logs.iter().map(|l| (l - lm).powi(2)).sum::<f64>() / 3.0).sqrt();
+    let lh = 3.182446305 * lsd / 2.0;
+    assert!((num(noisy, "relmse_geomean") - 24f64.powf(0.25)).abs() < 1e-12);
+    assert!((num(noisy, "relmse_geo_lo") - (lm - lh).exp()).abs() < 1e-8);
+    assert!((num(noisy, "relmse_geo_hi") - (lm + lh).exp()).abs() < 1e-8);
+    assert!(num(noisy, "relmse_geo_lo") > 0.0);
     // SSIM 0.1..0.4 and bias 0, 1, 2, 3 % scale it; fireflies 0..3 shift it.
     assert!((num(noisy, "ssim_mean") - 0.25).abs() < 1e-12);
     assert!((num(noisy, "ssim_ci95") - 0.1 * half).abs() < 1e-9);
@@ -320,6 +506,12 @@ fn cells_average_repeats_and_one_repeat_has_empty_intervals() {
         }
     }
     assert_eq!(recs1[0][col("relmse_mean")], "0.5");
+    assert_eq!(recs1[0][col("relmse_geomean")], "0.5");
+    // A zero relMSE has no log: the geometric columns are empty, the arithmetic ones are not.
+    let (_, recs0) = summary_csv(&[row(0, "", 0.0, 0.7, 2), row(1, "", 1.0, 0.7, 2)]);
+    assert_eq!(recs0[0][col("relmse_geomean")], "");
+    assert_eq!(recs0[0][col("relmse_geo_hi")], "");
+    assert_eq!(recs0[0][col("relmse_mean")], "0.5");
     assert_eq!(recs1[1][col("ssim_mean")], "0.9");
 }
 
@@ -495,6 +687,84 @@ fn a_quick_cbox_run_writes_its_report_and_nfor_helps_the_mean() {
         assert_eq!(!c[scol("nfor_s_per_megapixel_ci95")].is_empty(), denoised);
     }
 
+    for c in &cells {
+        // Two positive relMSEs: a geometric mean inside its positive interval.
+        let g = |name: &str| -> f64 { c[scol(name)].parse().unwrap() };
+        assert!(0.0 < g("relmse_geo_lo") && g("relmse_geo_lo") <= g("relmse_geomean"));
+        assert!(g("relmse_geomean") <= g("relmse_geo_hi"));
+    }
+
+    // The paired comparison: after NFOR the mean's sample variance, G-MoN and Zirr (halves)
+    // against the mean with halves; before it G-MoN's and Zirr's noisy estimates against the
+    // mean's.
+    let table = std::fs::read_to_string(out.join("denoise_paired.csv")).unwrap();
+    let mut reader = csv::Reader::from_reader(table.as_bytes());
+    let head = reader.headers().unwrap().clone();
+    let pcol = |name: &str| {
+        head.iter()
+            .position(|h| h == name)
+            .unwrap_or_else(|| panic!("{name} not in {head:?}"))
+    };
+    for name in [
+        "scene",
+        "spp",
+        "source",
+        "variance",
+        "stage",
+        "baseline",
+        "repeats",
+        "skipped",
+        "ratio_geomean",
+        "ratio_lo",
+        "ratio_hi",
+        "verdict",
+        "p_value",
+        "p_holm",
+        "verdict_holm",
+    ] {
+        pcol(name);
+    }
+    let paired: Vec<csv::StringRecord> = reader.records().map(Result::unwrap).collect();
+    let stages: Vec<(&str, &str, &str)> = paired
+        .iter()
+        .map(|r| {
+            (
+                &r[pcol("stage")],
+                &r[pcol("variance")],
+                &r[pcol("baseline")],
+            )
+        })
+        .collect();
+    assert_eq!(
+        stages,
+        [
+            ("noisy", "", "mean"),
+            ("noisy", "", "mean"),
+            ("denoised", "sample", "mean/halves"),
+            ("denoised", "halves", "mean/halves"),
+            ("denoised", "halves", "mean/halves"),
+        ],
+        "{table}"
+    );
+    let gmon = paired
+        .iter()
+        .find(|r| r[pcol("source")].starts_with("gmon") && &r[pcol("stage")] == "denoised")
+        .unwrap();
+    assert_eq!((&gmon[pcol("repeats")], &gmon[pcol("skipped")]), ("2", "0"));
+    // Its geometric mean is that of the two renders' ratios, read back from denoise.csv.
+    let gspec = gmon[pcol("source")].to_string();
+    let want = ((relmse("0", &gspec, "halves") / relmse("0", "mean", "halves"))
+        * (relmse("1", &gspec, "halves") / relmse("1", "mean", "halves")))
+    .sqrt();
+    let got: f64 = gmon[pcol("ratio_geomean")].parse().unwrap();
+    assert!((got - want).abs() <= 1e-12 * want, "{got} {want}");
+    let (lo, hi): (f64, f64) = (
+        gmon[pcol("ratio_lo")].parse().unwrap(),
+        gmon[pcol("ratio_hi")].parse().unwrap(),
+    );
+    assert!(lo <= got && got <= hi, "{lo} {got} {hi}");
+    assert!(["helps", "hurts", "same", "undecided"].contains(&&gmon[pcol("verdict")]));
+
     let mse = std::fs::read_to_string(out.join("mse_check.csv")).unwrap();
     // One interval per variance (sample, halves) and bandwidth (0.5, 1) over the two seeds.
     assert_eq!(mse.lines().count(), 1 + 4, "{mse}");
@@ -520,6 +790,14 @@ fn a_quick_cbox_run_writes_its_report_and_nfor_helps_the_mean() {
         "{summary}"
     );
     assert!(summary.contains(" ± "), "{summary}");
+    assert!(
+        summary.contains(
+            "## Does a robust estimator help? Paired ratios against the mean\n\nEach source"
+        ) && summary.contains("### After NFOR: against NFOR of the mean (halves variance)")
+            && summary.contains("### Before NFOR: noisy estimates against the noisy mean")
+            && summary.contains("In short, against NFOR of the mean (halves variance): "),
+        "{summary}"
+    );
     assert!(
         out.join("references")
             .join("cbox-64x64.exr.state")

@@ -1,10 +1,13 @@
 //! The denoising experiment's report: `denoise.csv` (one row per scene, spp, repeat, source,
 //! variance and stage), `denoise_summary.csv` (per cell the mean over repeats with a Student-t
-//! interval, [`denoise_cells`]), `mse_estimates.csv` (NFOR's MSE estimate against the truth), `scenes.csv`,
-//! `summary.md`, `manifest.json`, and the figures `relmse_vs_spp.png`, `ssim_vs_spp.png` and
+//! interval, [`denoise_cells`]), `denoise_paired.csv` (each source against the baseline, paired
+//! within each render, [`paired_comparisons`]), `mse_estimates.csv` (NFOR's MSE estimate against
+//! the truth), `scenes.csv`, `summary.md`, `manifest.json`, and the figures `relmse_vs_spp.png`, `ssim_vs_spp.png` and
 //! `montage.png`. Every file is written atomically; the reference cache beside them is left
 //! alone.
 
+pub use super::denoise_compare::{MeanInterval, mean_interval};
+use super::denoise_compare::{PairedRow, Verdict, geo_interval, paired_comparisons, t_quantile};
 use super::denoise_experiment::{DenoiseExperiment, variance_name};
 use super::denoise_run::{DENOISED, DenoiseRow, DenoiseSceneInfo, DenoiseSceneResult, MseRow};
 use super::report::{RunInfo, summary_head};
@@ -13,69 +16,18 @@ use crate::atomic::write_atomic;
 use crate::error::{Error, Result};
 use crate::harness::metrics::LEVEL;
 use serde::Serialize;
-use statrs::distribution::{ContinuousCDF, StudentsT};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-
-/// The mean of independent values and its two-sided Student-t interval at [`LEVEL`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MeanInterval {
-    /// How many values.
-    pub n: usize,
-    /// Their mean.
-    pub mean: f64,
-    /// Standard error of the mean, `sd / √n` (sample sd, `n − 1` in the denominator); `None`
-    /// for one value.
-    pub se: Option<f64>,
-    /// Half-width of the interval, `t(1 − (1 − LEVEL)/2, n − 1) · se`; `None` for one value.
-    pub half_width: Option<f64>,
-}
-
-/// The mean of `values` with its Student-t interval; `None` for no values. One value has a mean
-/// and no interval.
-///
-/// ```
-/// use fireflies::scenes::denoise_report::mean_interval;
-/// let m = mean_interval(&[1.0, 2.0, 3.0, 4.0]).unwrap();
-/// assert_eq!(m.mean, 2.5);
-/// // t(0.975, 3) · sd / √4 with sd = √(5/3).
-/// assert!((m.half_width.unwrap() - 3.182446305 * (5.0f64 / 3.0).sqrt() / 2.0).abs() < 1e-8);
-/// assert_eq!(mean_interval(&[7.0]).unwrap().half_width, None);
-/// ```
-pub fn mean_interval(values: &[f64]) -> Option<MeanInterval> {
-    let n = values.len();
-    if n == 0 {
-        return None;
-    }
-    let nf = n as f64;
-    let mean = values.iter().sum::<f64>() / nf;
-    if n < 2 {
-        return Some(MeanInterval {
-            n,
-            mean,
-            se: None,
-            half_width: None,
-        });
-    }
-    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (nf - 1.0);
-    let se = (var / nf).sqrt();
-    let t = StudentsT::new(0.0, 1.0, nf - 1.0)
-        .map(|d| d.inverse_cdf(0.5 + LEVEL / 2.0))
-        .unwrap_or(f64::NAN);
-    Some(MeanInterval {
-        n,
-        mean,
-        se: Some(se),
-        half_width: Some(t * se),
-    })
-}
 
 /// One row of `denoise_summary.csv`: a cell of the experiment (scene, spp, source, variance,
 /// stage) over its repeats. Each metric has its mean over repeats, the standard error of that
 /// mean and the half-width of its 95% Student-t interval (`_ci95`: the interval is
-/// `mean ± ci95`); with one repeat the `_se` and `_ci95` columns are empty. Every repeat is
-/// judged against the same reference, so the interval holds the renders' noise, not the
-/// reference's (which is common to all repeats).
+/// `mean ± ci95`); with one repeat the `_se` and `_ci95` columns are empty. relMSE also has its
+/// geometric mean over repeats with the log-scale interval `exp(mean ln ± t · se)`
+/// ([`geo_interval`]): never below zero, fitting a heavy-tailed positive metric; empty when a
+/// repeat's relMSE is zero or not finite. Every repeat is judged against the same reference,
+/// so the interval holds the renders' noise, not the reference's (which is common to all
+/// repeats).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct DenoiseCell {
     /// Scene name.
@@ -104,6 +56,12 @@ pub struct DenoiseCell {
     pub relmse_se: Option<f64>,
     /// Its interval's half-width.
     pub relmse_ci95: Option<f64>,
+    /// Geometric mean relMSE over repeats.
+    pub relmse_geomean: Option<f64>,
+    /// Lower end of its log-scale interval (empty with one repeat).
+    pub relmse_geo_lo: Option<f64>,
+    /// Upper end.
+    pub relmse_geo_hi: Option<f64>,
     /// Mean SSIM.
     pub ssim_mean: f64,
     /// Its standard error.
@@ -168,6 +126,7 @@ pub fn denoise_cells(rows: &[DenoiseRow]) -> Vec<DenoiseCell> {
             let own: Vec<&DenoiseRow> = rows.iter().filter(|r| key(r) == k).collect();
             let first = own.first()?;
             let (relmse_mean, relmse_se, relmse_ci95) = metric(&own, |r| Some(r.relmse));
+            let geo = geo_interval(&own.iter().map(|r| r.relmse).collect::<Vec<_>>());
             let (ssim_mean, ssim_se, ssim_ci95) = metric(&own, |r| Some(r.ssim));
             let (ff_mean, ff_se, ff_ci95) = metric(&own, |r| Some(r.firefly_pixels as f64));
             let (bias_mean, bias_se, bias_ci95) = metric(&own, |r| r.mean_bias_relative);
@@ -187,6 +146,9 @@ pub fn denoise_cells(rows: &[DenoiseRow]) -> Vec<DenoiseCell> {
                 relmse_mean: relmse_mean.unwrap_or(f64::NAN),
                 relmse_se,
                 relmse_ci95,
+                relmse_geomean: geo.map(|g| g.geomean),
+                relmse_geo_lo: geo.and_then(|g| g.lo),
+                relmse_geo_hi: geo.and_then(|g| g.hi),
                 ssim_mean: ssim_mean.unwrap_or(f64::NAN),
                 ssim_se,
                 ssim_ci95,
@@ -366,6 +328,7 @@ pub fn write_denoise_report(
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir.display(), &e))?;
     let rows: Vec<DenoiseRow> = results.iter().flat_map(|r| r.rows.clone()).collect();
     let cells = denoise_cells(&rows);
+    let paired = paired_comparisons(&rows);
     let mse: Vec<MseRow> = results.iter().flat_map(|r| r.mse.clone()).collect();
     let infos: Vec<DenoiseSceneInfo> = results.iter().map(|r| r.info.clone()).collect();
     let intervals = mse_intervals(&mse);
@@ -378,12 +341,13 @@ pub fn write_denoise_report(
     };
     put("denoise.csv", &to_csv(&rows)?)?;
     put("denoise_summary.csv", &to_csv(&cells)?)?;
+    put("denoise_paired.csv", &to_csv(&paired)?)?;
     put("mse_estimates.csv", &to_csv(&mse)?)?;
     put("mse_check.csv", &to_csv(&intervals)?)?;
     put("scenes.csv", &to_csv(&infos)?)?;
     put(
         "summary.md",
-        summary_md(exp, run, &infos, &rows, &cells, &mse, &intervals).as_bytes(),
+        summary_md(exp, run, &infos, &rows, &cells, &paired, &mse, &intervals).as_bytes(),
     )?;
     let manifest = serde_json::json!({
         "experiment": exp.source,
@@ -457,6 +421,234 @@ fn scene_spps(cells: &[DenoiseCell], scene: &str) -> Vec<u32> {
     v
 }
 
+/// A ratio to two or three significant digits, in scientific notation when very small or
+/// large.
+fn fmt_ratio(v: f64) -> String {
+    let a = v.abs();
+    if (100.0..10000.0).contains(&a) {
+        format!("{v:.0}")
+    } else if (10.0..100.0).contains(&a) {
+        format!("{v:.1}")
+    } else if (0.1..10.0).contains(&a) {
+        format!("{v:.2}")
+    } else if (0.01..0.1).contains(&a) {
+        format!("{v:.3}")
+    } else {
+        format!("{v:.1e}")
+    }
+}
+
+/// A paired cell: `0.38× [0.31, 0.46] helps`, bold when the verdict holds after Holm's
+/// correction too.
+fn paired_cell(r: &PairedRow) -> String {
+    let Some(g) = r.ratio_geomean else {
+        return r.verdict.as_str().to_string();
+    };
+    let mut cell = format!("{}×", fmt_ratio(g));
+    if let (Some(lo), Some(hi)) = (r.ratio_lo, r.ratio_hi) {
+        let _ = write!(cell, " [{}, {}]", fmt_ratio(lo), fmt_ratio(hi));
+    }
+    let _ = write!(cell, " {}", r.verdict.as_str());
+    if r.skipped > 0 {
+        let _ = write!(cell, " ({} skipped)", r.skipped);
+    }
+    if matches!(r.verdict_holm, Verdict::Helps | Verdict::Hurts) {
+        cell = format!("**{cell}**");
+    }
+    cell
+}
+
+/// The series of one stage's paired rows in order of first appearance: source, variance, label.
+fn paired_series<'a>(paired: &'a [PairedRow], stage: &str) -> Vec<(&'a str, &'a str, &'a str)> {
+    let mut v: Vec<(&str, &str, &str)> = Vec::new();
+    for r in paired.iter().filter(|r| r.stage == stage) {
+        let k = (r.source.as_str(), r.variance.as_str(), r.label.as_str());
+        if !v.contains(&k) {
+            v.push(k);
+        }
+    }
+    v
+}
+
+/// The section on paired ratios: what is compared and how, a table per stage, and the count of
+/// verdicts.
+fn paired_md(s: &mut String, exp: &DenoiseExperiment, paired: &[PairedRow]) {
+    let first = &exp.sources[0];
+    let base_var = first.variances.first().map_or("", |&v| variance_name(v));
+    let _ = writeln!(
+        s,
+        "## Does a robust estimator help? Paired ratios against the {b}\n\n\
+         Each source is compared with a baseline on the same renders. After NFOR, the baseline \
+         is NFOR of the {b} with {base_var} variance (the experiment file's first source and \
+         its first variance); every other source and variance after NFOR is compared with it. \
+         Before NFOR, the baseline is the {b}'s noisy estimate: does the robust estimator help \
+         before any denoising? All sources of one repeat are computed from the same render (the \
+         same samples, split into the same halves), so the render's luck moves them together; \
+         per repeat r the ratio relMSE(source, r) / relMSE(baseline, r) cancels most of it, \
+         where separate intervals per cell would keep it. A cell is the geometric mean of that \
+         ratio over the repeats, exp(mean of the log-ratios), below 1 when the source has the \
+         lower relMSE, with its {lvl:.0}% interval exp(mean ± t · se): se is the standard \
+         error of the mean log-ratio and t Student's quantile with repeats − 1 degrees of \
+         freedom ({t_text}). The interval assumes independent repeats and log-ratios roughly \
+         normal over them; a ratio of heavy-tailed relMSEs is far closer to that on the log \
+         scale, where halving and doubling are symmetric.\n\n\
+         Verdict: **helps** when the whole interval lies below 1, **hurts** when it lies above \
+         1, **undecided** when it holds 1, **same** when every repeat's relMSE is exactly the \
+         baseline's (as with G-MoN at two samples per half, where it equals the mean and NFOR \
+         gets the same input), **n/a** with fewer than two usable pairs (no interval). A pair \
+         with a relMSE that is zero or not finite on either side has no log-ratio: it is left \
+         out and counted in the `skipped` column of `denoise_paired.csv` (and in the \
+         cell){skipped}. Both sides are judged against the same reference, whose own noise adds \
+         the same floor to both relMSEs and pulls the ratio towards 1. Each verdict is at \
+         {lvl:.0}% for its own cell; over all cells of a stage some would be decided by chance, \
+         so a **bold** cell's verdict also holds after Holm's correction over every cell of its \
+         stage (`p_holm`, `verdict_holm` in `denoise_paired.csv`).\n",
+        b = first.label,
+        lvl = 100.0 * LEVEL,
+        t_text = if exp.repeats < 2 {
+            "with one repeat there is no interval".to_string()
+        } else {
+            let dof = f64::from(exp.repeats - 1);
+            let t = t_quantile(dof);
+            format!("{} here, t = {t:.2}", exp.repeats - 1)
+        },
+        skipped = match paired.iter().map(|r| r.skipped).sum::<usize>() {
+            0 => "; none was in this run".to_string(),
+            n => format!("; {n} were in this run"),
+        },
+    );
+    for (stage, title) in [
+        (
+            DENOISED,
+            format!(
+                "After NFOR: against NFOR of the {} ({base_var} variance)",
+                first.label
+            ),
+        ),
+        (
+            super::denoise_run::NOISY,
+            format!(
+                "Before NFOR: noisy estimates against the noisy {}",
+                first.label
+            ),
+        ),
+    ] {
+        let series = paired_series(paired, stage);
+        let _ = writeln!(
+            s,
+            "### {title}
+"
+        );
+        if series.is_empty() {
+            s.push_str(
+                "Nothing to compare: the stage has one source.
+
+",
+            );
+            continue;
+        }
+        s.push_str("| scene | spp |");
+        for (_, var, label) in &series {
+            if var.is_empty() {
+                let _ = write!(s, " {label} noisy |");
+            } else {
+                let _ = write!(s, " NFOR {label} ({var}) |");
+            }
+        }
+        s.push_str("\n|---|---:|");
+        for _ in &series {
+            s.push_str("---:|");
+        }
+        s.push('\n');
+        let mut cells: Vec<(&str, u32)> = Vec::new();
+        for r in paired.iter().filter(|r| r.stage == stage) {
+            if !cells.contains(&(r.scene.as_str(), r.spp)) {
+                cells.push((r.scene.as_str(), r.spp));
+            }
+        }
+        for (scene, spp) in cells {
+            let _ = write!(s, "| {scene} | {spp} |");
+            for &(src, var, _) in &series {
+                match paired.iter().find(|r| {
+                    r.stage == stage
+                        && r.scene == scene
+                        && r.spp == spp
+                        && r.source == src
+                        && r.variance == var
+                }) {
+                    Some(r) => {
+                        let _ = write!(s, " {} |", paired_cell(r));
+                    }
+                    None => s.push_str(" — |"),
+                }
+            }
+            s.push('\n');
+        }
+        s.push('\n');
+    }
+
+    s.push_str(
+        "### How often each source helps\n\n\
+         (scene, spp) cells per verdict; the last two columns count the verdicts that hold \
+         after Holm's correction over the stage.\n\n\
+         | stage | source | variance | cells | helps | hurts | same | undecided | n/a | helps (Holm) | hurts (Holm) |\n\
+         |---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    let mut closing = Vec::new();
+    for stage in [DENOISED, super::denoise_run::NOISY] {
+        for (src, var, label) in paired_series(paired, stage) {
+            let own: Vec<&PairedRow> = paired
+                .iter()
+                .filter(|r| r.stage == stage && r.source == src && r.variance == var)
+                .collect();
+            let count = |v: Verdict| own.iter().filter(|r| r.verdict == v).count();
+            let holm = |v: Verdict| own.iter().filter(|r| r.verdict_holm == v).count();
+            let _ = writeln!(
+                s,
+                "| {stage} | {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                if var.is_empty() { "—" } else { var },
+                own.len(),
+                count(Verdict::Helps),
+                count(Verdict::Hurts),
+                count(Verdict::Same),
+                count(Verdict::Undecided),
+                count(Verdict::NoInterval),
+                holm(Verdict::Helps),
+                holm(Verdict::Hurts),
+            );
+            if stage == DENOISED {
+                let mut parts = vec![
+                    format!("helps in {}", count(Verdict::Helps)),
+                    format!("hurts in {}", count(Verdict::Hurts)),
+                    format!("is undecided in {}", count(Verdict::Undecided)),
+                ];
+                for (v, what) in [
+                    (Verdict::Same, "is the same in"),
+                    (Verdict::NoInterval, "has no interval in"),
+                ] {
+                    if count(v) > 0 {
+                        parts.push(format!("{what} {}", count(v)));
+                    }
+                }
+                closing.push(format!(
+                    "NFOR of {label} ({var}) {} of its {} (scene, spp) cells",
+                    parts.join(", "),
+                    own.len()
+                ));
+            }
+        }
+    }
+    s.push('\n');
+    if !closing.is_empty() {
+        let _ = writeln!(
+            s,
+            "In short, against NFOR of the {} ({base_var} variance): {}.\n",
+            first.label,
+            closing.join("; ")
+        );
+    }
+}
+
 /// What the tables' `±` means, and how the best cell is chosen, for `repeats` renders.
 fn repeats_text(exp: &DenoiseExperiment) -> String {
     let seeds = (0..exp.repeats.min(3))
@@ -479,7 +671,12 @@ fn repeats_text(exp: &DenoiseExperiment) -> String {
              the interval holds the renders' noise only: the reference's own noise is common to \
              all repeats and shifts every cell of a scene alike (its size is the relMSE floor in \
              the last table). The interval is symmetric: on heavy-tailed cells its lower end can \
-             fall below zero. The sources of one repeat share its render.",
+             fall below zero. The per-scene tables therefore also give relMSE's geometric mean \
+             over the repeats with a log-scale interval, exp(mean of ln relMSE ± t · its \
+             standard error), which stays positive (`relmse_geomean`, `relmse_geo_lo`, \
+             `relmse_geo_hi` in `denoise_summary.csv`; empty if a repeat's relMSE is zero). The \
+             sources of one repeat share its render, so they are compared pairwise in the \
+             section after the first table.",
             exp.repeats,
             if exp.repeats > 3 { ", …" } else { "" },
             100.0 * LEVEL,
@@ -488,12 +685,14 @@ fn repeats_text(exp: &DenoiseExperiment) -> String {
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn summary_md(
     exp: &DenoiseExperiment,
     run: &RunInfo,
     infos: &[DenoiseSceneInfo],
     rows: &[DenoiseRow],
     cells: &[DenoiseCell],
+    paired: &[PairedRow],
     mse: &[MseRow],
     intervals: &[MseInterval],
 ) -> String {
@@ -516,7 +715,8 @@ fn summary_md(
          spp, repeat, source, variance and stage; the noisy rows have no variance), \
          `denoise_summary.csv` (per cell the mean over repeats with its standard error and \
          95% interval half-width, `<metric>_mean`, `<metric>_se`, `<metric>_ci95`), \
-         `mse_estimates.csv`, `mse_check.csv`, `scenes.csv`, `manifest.json` and the figures \
+         `denoise_paired.csv` (each source's relMSE over the baseline's, paired within each \
+         render), `mse_estimates.csv`, `mse_check.csv`, `scenes.csv`, `manifest.json` and the figures \
          at the end.\n",
         run.command,
         run.wall_s,
@@ -610,6 +810,7 @@ fn summary_md(
         }
     }
     s.push('\n');
+    paired_md(&mut s, exp, paired);
 
     s.push_str("## Per scene: every metric\n\n");
     s.push_str(
@@ -641,13 +842,13 @@ fn summary_md(
             info.reference_spp
         );
         s.push_str(
-            "| spp | source | variance | stage | relMSE | SSIM | firefly px | rel. bias | NFOR s | NFOR s/MP |\n\
-             |---:|---|---|---|---:|---:|---:|---:|---:|---:|\n",
+            "| spp | source | variance | stage | relMSE | relMSE, geometric mean [95%] | SSIM | firefly px | rel. bias | NFOR s | NFOR s/MP |\n\
+             |---:|---|---|---|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         for r in cells.iter().filter(|r| r.scene == info.scene) {
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 r.spp,
                 r.label,
                 if r.variance.is_empty() {
@@ -657,6 +858,11 @@ fn summary_md(
                 },
                 r.stage,
                 pm_relmse(r.relmse_mean, r.relmse_ci95),
+                match (r.relmse_geomean, r.relmse_geo_lo, r.relmse_geo_hi) {
+                    (Some(g), Some(lo), Some(hi)) => format!("{g:.3e} [{lo:.2e}, {hi:.2e}]"),
+                    (Some(g), _, _) => format!("{g:.3e}"),
+                    _ => "—".to_string(),
+                },
                 pm(r.ssim_mean, r.ssim_ci95, |v| format!("{v:.4}")),
                 if r.repeats < 2 {
                     format!("{}", r.firefly_pixels_mean)

@@ -8,11 +8,13 @@
 //! [`tables`] turns rows into tables and [`plots`] into figures; [`report`] writes them.
 //! [`nfor_input`] turns a render's half buffers into NFOR's input; the denoising experiment
 //! (`fireflies denoise-experiment`) is [`denoise_experiment`] (schema), [`denoise_run`] (one
-//! scene), [`denoise_report`] (its tables) and [`denoise_plots`] (its figures).
+//! scene), [`denoise_compare`] (intervals over repeats and paired ratios), [`denoise_report`]
+//! (its tables) and [`denoise_plots`] (its figures).
 //! [`transfer`] is the loop between real pixels and the synthetic harness (`fireflies
 //! transfer`), [`transfer_report`] writes its report.
 
 pub mod cost;
+pub mod denoise_compare;
 pub mod denoise_experiment;
 pub mod denoise_plots;
 pub mod denoise_report;
