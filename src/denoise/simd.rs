@@ -11,13 +11,27 @@
 //! Results do not depend on the choice: Rust never fuses a multiply and an add on its own, and
 //! the loops fix their summation order in code (several running sums, then their sum in order),
 //! so wider registers compute the same operations in the same order. `FIREFLIES_SIMD=scalar`
-//! forces the baseline path; `tests/denoise.rs` checks that both give the same bits.
+//! forces the baseline path, as does [`force_scalar`]; `tests/denoise.rs` checks that
+//! both give the same bits.
 
 use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, Ordering};
 
-/// The instruction set chosen once per process.
+/// Set by [`force_scalar`].
+static FORCE_SCALAR: AtomicBool = AtomicBool::new(false);
+
+/// Makes every later job take the baseline path (`true`) or the detected one (`false`), for
+/// checks that both agree. Results do not depend on it, only speed.
+pub fn force_scalar(on: bool) {
+    FORCE_SCALAR.store(on, Ordering::Relaxed);
+}
+
+/// The instruction set: detected once per process, unless [`force_scalar`] is on.
 fn arch() -> pulp::Arch {
     static ARCH: OnceLock<pulp::Arch> = OnceLock::new();
+    if FORCE_SCALAR.load(Ordering::Relaxed) {
+        return pulp::Arch::Scalar;
+    }
     *ARCH.get_or_init(|| {
         if std::env::var("FIREFLIES_SIMD").is_ok_and(|v| v == "scalar") {
             pulp::Arch::Scalar
