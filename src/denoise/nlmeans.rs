@@ -128,7 +128,46 @@ fn valid_range(n: usize, d: isize) -> (usize, usize) {
 pub(crate) struct Scratch {
     dist: Vec<f32>,
     rows: Vec<f32>,
+    cols: Vec<f32>,
     cx: Vec<f32>,
+    /// Partial sums of 2, 4, 8, ... terms for [`box_sums`].
+    levels: Vec<Vec<f32>>,
+}
+
+/// `out[j] = Σ_{s<len} x[j + s·stride]` for `j < out.len()`, by doubling: sums of 2, 4, 8, ...
+/// consecutive terms, then one of each power in `len`'s binary expansion (a 7-term sum costs 4
+/// additions per output instead of 6, in a fixed order). Each loop is a shifted addition of
+/// whole slices, which vectorises; with `stride` 1 it sums along rows, with a row length down
+/// columns.
+#[inline(always)]
+fn box_sums(x: &[f32], stride: usize, len: usize, levels: &mut Vec<Vec<f32>>, out: &mut [f32]) {
+    let n = out.len();
+    let top = usize::BITS - 1 - len.leading_zeros(); // largest power of two in len: 2^top
+    levels.resize_with(top as usize, Vec::new);
+    // levels[k - 1][j] = Σ_{s < 2^k} x[j + s·stride], wherever the output needs it.
+    for k in 1..=top as usize {
+        let half = (1usize << (k - 1)) * stride;
+        let need = n + (len - (1 << k)) * stride;
+        let (done, rest) = levels.split_at_mut(k - 1);
+        let prev: &[f32] = if k == 1 { x } else { &done[k - 2] };
+        let cur = &mut rest[0];
+        cur.resize(need, 0.0);
+        for ((c, a), b) in cur.iter_mut().zip(&prev[..need]).zip(&prev[half..half + need]) {
+            *c = a + b;
+        }
+    }
+    let first: &[f32] = if top == 0 { x } else { &levels[top as usize - 1] };
+    out.copy_from_slice(&first[..n]);
+    let mut offset = (1usize << top) * stride;
+    for k in (0..top as usize).rev() {
+        if len & (1 << k) != 0 {
+            let part: &[f32] = if k == 0 { x } else { &levels[k - 1] };
+            for (o, v) in out.iter_mut().zip(&part[offset..offset + n]) {
+                *o += v;
+            }
+            offset += (1 << k) * stride;
+        }
+    }
 }
 
 /// One guide channel: values and their variances.
@@ -193,18 +232,13 @@ pub(crate) fn patch_distances(
             row[i] = d.min(DISTANCE_CLAMP);
         }
     }
-    // Horizontal patch sums of every buffer row, then vertical sums of those.
-    scratch.rows.clear();
-    scratch.rows.resize(ow * bh, 0.0);
-    for r in 0..bh {
-        let src = &scratch.dist[r * bw..(r + 1) * bw];
-        let dst = &mut scratch.rows[r * ow..(r + 1) * ow];
-        for s in 0..=2 * f {
-            for (d, v) in dst.iter_mut().zip(&src[s..s + ow]) {
-                *d += v;
-            }
-        }
-    }
+    // Horizontal patch sums along the whole buffer (sums that would run past a row's end are
+    // computed but never read), then vertical sums of those down the columns.
+    let side = 2 * f + 1;
+    scratch.rows.resize((bh - 1) * bw + ow, 0.0);
+    box_sums(&scratch.dist, 1, side, &mut scratch.levels, &mut scratch.rows);
+    scratch.cols.resize((oh - 1) * bw + ow, 0.0);
+    box_sums(&scratch.rows, bw, side, &mut scratch.levels, &mut scratch.cols);
     scratch.cx.clear();
     scratch
         .cx
@@ -214,17 +248,9 @@ pub(crate) fn patch_distances(
         let r0 = y - oy0;
         let o = (y - rect.y0) * rect.width() + (ox0 - rect.x0);
         let dst = &mut out[o..o + ow];
-        dst.fill(0.0);
-        for s in 0..=2 * f {
-            for (d, v) in dst
-                .iter_mut()
-                .zip(&scratch.rows[(r0 + s) * ow..(r0 + s + 1) * ow])
-            {
-                *d += v;
-            }
-        }
-        for (d, cx) in dst.iter_mut().zip(&scratch.cx) {
-            *d /= cx * ny;
+        let sums = &scratch.cols[r0 * bw..r0 * bw + ow];
+        for ((d, s), cx) in dst.iter_mut().zip(sums).zip(&scratch.cx) {
+            *d = s / (cx * ny);
         }
     }
 }
