@@ -31,6 +31,9 @@ use crate::error::{Error, Result};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
+/// Offsets whose distances are transposed together (16 floats: one cache line per pixel).
+const BLOCK: usize = 16;
+
 /// Ridge on the normalised normal equations, relative to the sum of weights.
 pub const RIDGE: f64 = 1e-6;
 
@@ -226,9 +229,13 @@ impl Workspace {
         self.dists.clear();
         self.dists.resize(offsets_n * area, 0.0);
         self.dist.resize(TILE * TILE, 0.0);
-        self.dmax.resize(TILE * TILE, 0.0);
+        self.dmax.resize(BLOCK * TILE * TILE, 0.0);
         for (o, (dy, dx)) in offsets(r).enumerate() {
-            self.dmax[..area].fill(f32::NEG_INFINITY);
+            // A block of offsets at a time, transposed into `dists` below with whole cache
+            // lines written per tile pixel.
+            let slot = o % BLOCK;
+            let dmax = &mut self.dmax[slot * area..(slot + 1) * area];
+            dmax.fill(f32::NEG_INFINITY);
             for c in 0..guide.channels() {
                 let g = Guide {
                     value: guide.plane(c),
@@ -246,12 +253,18 @@ impl Workspace {
                     &mut self.scratch,
                     &mut self.dist,
                 );
-                for (m, d) in self.dmax[..area].iter_mut().zip(&self.dist[..area]) {
+                for (m, d) in dmax.iter_mut().zip(&self.dist[..area]) {
                     *m = m.max(*d);
                 }
             }
-            for (t, &d) in self.dmax[..area].iter().enumerate() {
-                self.dists[t * offsets_n + o] = d;
+            if slot == BLOCK - 1 || o == offsets_n - 1 {
+                let first = o - slot;
+                for t in 0..area {
+                    let row = &mut self.dists[t * offsets_n + first..][..=slot];
+                    for (q, v) in row.iter_mut().enumerate() {
+                        *v = self.dmax[q * area + t];
+                    }
+                }
             }
         }
         let out = Rect {
