@@ -499,3 +499,31 @@ fn bumpmap_errors_name_the_element() {
     .expect_err("no uvs");
     assert!(err.to_string().contains("no texture coordinates"), "{err}");
 }
+
+/// NFOR's normal feature sees the bumps: a bump map reports its bumped normal (the frame its
+/// `eval` shades with), a plain BSDF the shading normal (`None`), and a two-sided bump map seen
+/// from the back the mirrored normal of the mirrored viewer. Before, every hit reported the
+/// shading normal, so a denoiser guided by it could blur the relief away.
+#[test]
+fn bumped_normal_is_the_normal_feature() {
+    use fireflies::render::bsdfs::twosided::TwoSided;
+    let (bump, at) = tilted_point();
+    let wi = Vec3::new(0.3, -0.2, 0.9).normalize();
+    let n = bump
+        .feature_normal(&at, wi)
+        .expect("a bump map reports its normal");
+    assert_eq!(n, bump.local_frame(&at, wi).n);
+    assert!(
+        n.z < 0.8,
+        "bumped by 40-50 degrees, so well off the shading normal: {n}"
+    );
+    assert_eq!(Diffuse::new(REFLECTANCE).feature_normal(&at, wi), None);
+    let two = TwoSided(Arc::new(bump.clone()));
+    assert_eq!(two.feature_normal(&at, wi), Some(n));
+    let back = Vec3::new(wi.x, wi.y, -wi.z);
+    let mirrored = bump.local_frame(&at, wi).n;
+    assert_eq!(
+        two.feature_normal(&at, back),
+        Some(Vec3::new(mirrored.x, mirrored.y, -mirrored.z))
+    );
+}

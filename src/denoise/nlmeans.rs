@@ -152,11 +152,19 @@ fn box_sums(x: &[f32], stride: usize, len: usize, levels: &mut Vec<Vec<f32>>, ou
         let prev: &[f32] = if k == 1 { x } else { &done[k - 2] };
         let cur = &mut rest[0];
         cur.resize(need, 0.0);
-        for ((c, a), b) in cur.iter_mut().zip(&prev[..need]).zip(&prev[half..half + need]) {
+        for ((c, a), b) in cur
+            .iter_mut()
+            .zip(&prev[..need])
+            .zip(&prev[half..half + need])
+        {
             *c = a + b;
         }
     }
-    let first: &[f32] = if top == 0 { x } else { &levels[top as usize - 1] };
+    let first: &[f32] = if top == 0 {
+        x
+    } else {
+        &levels[top as usize - 1]
+    };
     out.copy_from_slice(&first[..n]);
     let mut offset = (1usize << top) * stride;
     for k in (0..top as usize).rev() {
@@ -236,9 +244,21 @@ pub(crate) fn patch_distances(
     // computed but never read), then vertical sums of those down the columns.
     let side = 2 * f + 1;
     scratch.rows.resize((bh - 1) * bw + ow, 0.0);
-    box_sums(&scratch.dist, 1, side, &mut scratch.levels, &mut scratch.rows);
+    box_sums(
+        &scratch.dist,
+        1,
+        side,
+        &mut scratch.levels,
+        &mut scratch.rows,
+    );
     scratch.cols.resize((oh - 1) * bw + ow, 0.0);
-    box_sums(&scratch.rows, bw, side, &mut scratch.levels, &mut scratch.cols);
+    box_sums(
+        &scratch.rows,
+        bw,
+        side,
+        &mut scratch.levels,
+        &mut scratch.cols,
+    );
     scratch.cx.clear();
     scratch
         .cx

@@ -161,7 +161,11 @@ fn trace<const FEATURES: bool>(
                     dp_du: hit.dp_du,
                     dp_dv: hit.dp_dv,
                 };
-                features.normal = hit.ns;
+                let wi = at.frame.to_local(-ray.d);
+                features.normal = match bsdf.feature_normal(&at, wi) {
+                    Some(n) => at.frame.to_world(n),
+                    None => hit.ns,
+                };
                 features.albedo = bsdf.albedo(&at);
                 features.depth = travelled;
                 found = true;

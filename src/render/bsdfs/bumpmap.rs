@@ -190,6 +190,10 @@ impl Bsdf for BumpMap {
         self.nested.albedo(at)
     }
 
+    fn feature_normal(&self, at: &SurfacePoint, wi: Vec3) -> Option<Vec3> {
+        Some(self.local_frame(at, wi).n)
+    }
+
     fn eval_pdf(&self, at: &SurfacePoint, wi: Vec3, wo: Vec3) -> (Rgb, f32) {
         let local = self.local_frame(at, wi);
         let bumped_wo = local.to_local(wo);

@@ -65,6 +65,10 @@ impl Bsdf for Mask {
         self.nested.albedo(at) * self.opacity(at)
     }
 
+    fn feature_normal(&self, at: &SurfacePoint, wi: Vec3) -> Option<Vec3> {
+        self.nested.feature_normal(at, wi)
+    }
+
     fn transmits(&self) -> bool {
         true
     }

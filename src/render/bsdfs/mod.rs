@@ -158,6 +158,14 @@ pub trait Bsdf: Debug + Send + Sync {
     /// `diffuse` and the plastics but π·f(n, n) elsewhere, which is unbounded for a smooth
     /// rough conductor; Tungsten returns each BSDF's base colour. We follow Tungsten's rule.
     fn albedo(&self, at: &SurfacePoint) -> Rgb;
+
+    /// The normal NFOR's *normal* feature records, in the shading frame's coordinates, for a
+    /// viewer in direction `wi`; `None` for the shading normal itself. A bump map returns its
+    /// bumped normal, so that a denoiser guided by the feature keeps the bumps the colour
+    /// shows (wrappers pass the question on to the BSDF they wrap).
+    fn feature_normal(&self, _at: &SurfacePoint, _wi: Vec3) -> Option<Vec3> {
+        None
+    }
 }
 
 /// `v` with its `z` negated (mirror through the tangent plane).

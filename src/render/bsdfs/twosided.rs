@@ -62,6 +62,15 @@ impl Bsdf for TwoSided {
         self.0.albedo(at)
     }
 
+    /// Seen from the back, the nested BSDF's normal for the mirrored viewer, mirrored back.
+    fn feature_normal(&self, at: &SurfacePoint, wi: Vec3) -> Option<Vec3> {
+        if wi.z < 0.0 {
+            self.0.feature_normal(at, flip_z(wi)).map(flip_z)
+        } else {
+            self.0.feature_normal(at, wi)
+        }
+    }
+
     fn eval_pdf(&self, at: &SurfacePoint, wi: Vec3, wo: Vec3) -> (Rgb, f32) {
         if wi.z < 0.0 {
             self.0.eval_pdf(at, flip_z(wi), flip_z(wo))
