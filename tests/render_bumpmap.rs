@@ -527,3 +527,46 @@ fn bumped_normal_is_the_normal_feature() {
         Some(Vec3::new(mirrored.x, mirrored.y, -mirrored.z))
     );
 }
+
+/// The integrator records the bump map's normal as NFOR's normal feature: a flat rectangle
+/// facing the camera gives one normal at every pixel when plain, and normals tilted by the
+/// height map's slope when bumped (the texture `y_float.exr` varies along v).
+#[test]
+fn bumped_plate_tilts_the_rendered_normal_feature() {
+    use fireflies::render::integrator::radiance_features;
+    use fireflies::render::sampler::SampleStream;
+    use fireflies::render::world::World;
+    let plate = |bsdf: &str| {
+        let mut desc = load(&format!(
+            "<shape type=\"rectangle\"><transform name=\"to_world\"><rotate y=\"1\" \
+             angle=\"180\"/><translate z=\"5\"/></transform>{bsdf}</shape>\
+             <emitter type=\"constant\"><rgb name=\"radiance\" value=\"1, 1, 1\"/></emitter>"
+        ))
+        .unwrap();
+        desc.camera.width = 16;
+        desc.camera.height = 16;
+        let world = World::new(&desc);
+        // The largest angle between the normal features of the centre 8x8 pixels (all on the plate).
+        let normals: Vec<Vec3> = (4..12)
+            .flat_map(|y| (4..12).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let mut rng = SampleStream::new(1, u64::from(y * 16 + x), 0);
+                radiance_features(&world, x, y, &mut rng).1.normal
+            })
+            .collect();
+        normals
+            .iter()
+            .flat_map(|a| normals.iter().map(move |b| a.angle_between(*b)))
+            .fold(0.0f32, f32::max)
+    };
+    let flat = plate("<bsdf type=\"diffuse\"/>");
+    let bumped = plate(&format!(
+        "<bsdf type=\"bumpmap\">{HEIGHT}<float name=\"scale\" value=\"0.3\"/>\
+         <bsdf type=\"diffuse\"/></bsdf>"
+    ));
+    assert!(flat < 1e-3, "a flat plate's normals differ by {flat} rad");
+    assert!(
+        bumped > 0.05,
+        "a bumped plate's normals differ by only {bumped} rad"
+    );
+}
