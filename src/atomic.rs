@@ -59,6 +59,46 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     })
 }
 
+/// The files of one report directory, each written with [`write_atomic`] and remembered, so
+/// that a report writer can return every path it wrote.
+#[derive(Debug)]
+pub struct ReportFiles {
+    dir: PathBuf,
+    written: Vec<PathBuf>,
+}
+
+impl ReportFiles {
+    /// Files to be written into `dir` (which must exist).
+    pub fn new(dir: &Path) -> Self {
+        ReportFiles {
+            dir: dir.to_path_buf(),
+            written: Vec::new(),
+        }
+    }
+
+    /// Writes `dir/name` atomically.
+    ///
+    /// # Errors
+    ///
+    /// As [`write_atomic`].
+    pub fn put(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
+        let path = self.dir.join(name);
+        write_atomic(&path, bytes)?;
+        self.written.push(path);
+        Ok(())
+    }
+
+    /// Adds paths written by other means (figures).
+    pub fn extend(&mut self, paths: impl IntoIterator<Item = PathBuf>) {
+        self.written.extend(paths);
+    }
+
+    /// Every path written, in order.
+    pub fn into_paths(self) -> Vec<PathBuf> {
+        self.written
+    }
+}
+
 /// Replaces the directory `target` as a unit by the one `fill` writes, and returns what `fill`
 /// returned. Afterwards `target` holds exactly what `fill` wrote; whenever the process is
 /// killed, `target` holds either its old content, complete, or the new one, complete.

@@ -12,7 +12,7 @@ use super::denoise_experiment::{DenoiseExperiment, variance_name};
 use super::denoise_run::{DENOISED, DenoiseRow, DenoiseSceneInfo, DenoiseSceneResult, MseRow};
 use super::report::{RunInfo, summary_head};
 use super::tables::to_csv;
-use crate::atomic::write_atomic;
+use crate::atomic::ReportFiles;
 use crate::error::{Error, Result};
 use crate::harness::metrics::LEVEL;
 use serde::Serialize;
@@ -332,20 +332,14 @@ pub fn write_denoise_report(
     let mse: Vec<MseRow> = results.iter().flat_map(|r| r.mse.clone()).collect();
     let infos: Vec<DenoiseSceneInfo> = results.iter().map(|r| r.info.clone()).collect();
     let intervals = mse_intervals(&mse);
-    let mut written = Vec::new();
-    let mut put = |name: &str, bytes: &[u8]| -> Result<()> {
-        let path = dir.join(name);
-        write_atomic(&path, bytes)?;
-        written.push(path);
-        Ok(())
-    };
-    put("denoise.csv", &to_csv(&rows)?)?;
-    put("denoise_summary.csv", &to_csv(&cells)?)?;
-    put("denoise_paired.csv", &to_csv(&paired)?)?;
-    put("mse_estimates.csv", &to_csv(&mse)?)?;
-    put("mse_check.csv", &to_csv(&intervals)?)?;
-    put("scenes.csv", &to_csv(&infos)?)?;
-    put(
+    let mut files = ReportFiles::new(dir);
+    files.put("denoise.csv", &to_csv(&rows)?)?;
+    files.put("denoise_summary.csv", &to_csv(&cells)?)?;
+    files.put("denoise_paired.csv", &to_csv(&paired)?)?;
+    files.put("mse_estimates.csv", &to_csv(&mse)?)?;
+    files.put("mse_check.csv", &to_csv(&intervals)?)?;
+    files.put("scenes.csv", &to_csv(&infos)?)?;
+    files.put(
         "summary.md",
         summary_md(exp, run, &infos, &rows, &cells, &paired, &mse, &intervals).as_bytes(),
     )?;
@@ -365,16 +359,16 @@ pub fn write_denoise_report(
         "crate_version": env!("CARGO_PKG_VERSION"),
         "git_commit": crate::report::tables::git_commit(),
     });
-    put(
+    files.put(
         "manifest.json",
         (serde_json::to_string_pretty(&manifest).unwrap_or_default() + "\n").as_bytes(),
     )?;
     if !cells.is_empty() {
-        written.extend(super::denoise_plots::write_plots(
+        files.extend(super::denoise_plots::write_plots(
             dir, exp, &cells, results,
         )?);
     }
-    Ok(written)
+    Ok(files.into_paths())
 }
 
 fn opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {

@@ -6,7 +6,7 @@ use super::run::SceneResult;
 use super::tables::{
     self, CostRow, DelayedRow, MetricRow, RankRow, SceneInfo, Table2Row, ZirrPoint, to_csv,
 };
-use crate::atomic::write_atomic;
+use crate::atomic::ReportFiles;
 use crate::error::{Error, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -73,25 +73,19 @@ pub fn write_report(
     let zirr = tables::zirr_points(&rows);
     let ranking = tables::ranking(&rows);
 
-    let mut written = Vec::new();
-    let mut put = |name: &str, bytes: &[u8]| -> Result<()> {
-        let path = dir.join(name);
-        write_atomic(&path, bytes)?;
-        written.push(path);
-        Ok(())
-    };
-    put("metrics.csv", &to_csv(&rows)?)?;
-    put("costs.csv", &to_csv(&costs)?)?;
-    put("delayed.csv", &to_csv(&delayed)?)?;
-    put("scenes.csv", &to_csv(&infos)?)?;
-    put("table1.csv", &to_csv(&t1)?)?;
-    put("table2.csv", &tables::table2_csv(&t2, thresholds)?)?;
-    put("zirr_kappa.csv", &to_csv(&zirr)?)?;
-    put("ranking.csv", &to_csv(&ranking)?)?;
+    let mut files = ReportFiles::new(dir);
+    files.put("metrics.csv", &to_csv(&rows)?)?;
+    files.put("costs.csv", &to_csv(&costs)?)?;
+    files.put("delayed.csv", &to_csv(&delayed)?)?;
+    files.put("scenes.csv", &to_csv(&infos)?)?;
+    files.put("table1.csv", &to_csv(&t1)?)?;
+    files.put("table2.csv", &tables::table2_csv(&t2, thresholds)?)?;
+    files.put("zirr_kappa.csv", &to_csv(&zirr)?)?;
+    files.put("ranking.csv", &to_csv(&ranking)?)?;
     let summary = summary_md(
         exp, run, &infos, &rows, &costs, &delayed, &t2, &zirr, &ranking,
     );
-    put("summary.md", summary.as_bytes())?;
+    files.put("summary.md", summary.as_bytes())?;
     let manifest = serde_json::json!({
         "experiment": exp.source,
         "quick": exp.quick,
@@ -111,7 +105,7 @@ pub fn write_report(
         "crate_version": env!("CARGO_PKG_VERSION"),
         "git_commit": crate::report::tables::git_commit(),
     });
-    put(
+    files.put(
         "manifest.json",
         serde_json::to_string_pretty(&manifest)
             .unwrap_or_default()
@@ -122,10 +116,10 @@ pub fn write_report(
         .iter()
         .map(|&i| exp.estimators[i].to_string())
         .collect();
-    written.extend(super::plots::write_plots(
+    files.extend(super::plots::write_plots(
         dir, &rows, &plotted, &zirr, results, exp.quick,
     )?);
-    Ok(written)
+    Ok(files.into_paths())
 }
 
 fn opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {

@@ -569,21 +569,15 @@ pub fn write_report(
     info: &RunInfo,
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir.display(), &e))?;
-    let mut written = Vec::new();
-    let mut put = |name: &str, bytes: &[u8]| -> Result<()> {
-        let path = dir.join(name);
-        write_atomic(&path, bytes)?;
-        written.push(path);
-        Ok(())
-    };
-    put("transfer.csv", &transfer_csv(results)?)?;
-    put("pixels.csv", &pixels_csv(results)?)?;
-    put("summary.md", summary_md(exp, results, info).as_bytes())?;
+    let mut files = crate::atomic::ReportFiles::new(dir);
+    files.put("transfer.csv", &transfer_csv(results)?)?;
+    files.put("pixels.csv", &pixels_csv(results)?)?;
+    files.put("summary.md", summary_md(exp, results, info).as_bytes())?;
     let png = dir.join("predicted_vs_measured.png");
     if write_plot(&png, results)? {
-        written.push(png);
+        files.extend([png]);
     }
-    Ok(written)
+    Ok(files.into_paths())
 }
 
 /// Image size in pixels.
