@@ -15,7 +15,7 @@
 
 use crate::dist::Dist;
 use crate::harness::metrics::{Caveat, CellMetrics, Interval, Metric, TAIL_EVENTS, Z};
-use crate::harness::pairs::PairEffect;
+use crate::harness::unseen::TailEffects;
 use rand::SeedableRng;
 use rand_distr::{Binomial, Distribution};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -241,7 +241,7 @@ pub fn caveat(
     metric: Metric,
     cell: &CellMetrics,
     law: Option<&MeanLaw>,
-    pairs: Option<&PairEffect>,
+    tail: Option<&TailEffects>,
     mu: f64,
     is_mean: bool,
     infinite_law_variance: bool,
@@ -257,9 +257,9 @@ pub fn caveat(
         }
         _ => {}
     }
-    // What the run cannot see: trials with two outliers (the mean's own rare events are the
-    // law's dominance below).
-    if !is_mean && pairs.is_some_and(|p| p.could_move(metric, cell, mu)) {
+    // What the run cannot see: trials with two outliers, and the tail it reaches about once
+    // (the mean's own rare events are the law's dominance below).
+    if !is_mean && tail.is_some_and(|t| t.dominate(metric, cell, mu)) {
         return Some(Caveat::TailDominated);
     }
     let top = &cell.top_share;

@@ -7,9 +7,9 @@ pub mod experiment;
 pub mod gate;
 pub mod law;
 pub mod metrics;
-pub mod pairs;
 pub mod runner;
 pub mod shards;
+pub mod unseen;
 
 pub use checks::CheckResult;
 pub use experiment::Experiment;

@@ -12,7 +12,7 @@ use super::claims;
 use super::experiment::{Distribution, Experiment};
 use super::law::MeanLaw;
 use super::metrics::{CellAccumulator, Observation};
-use super::pairs::{self, PairEffect};
+use super::unseen::{self, TailEffects};
 use crate::error::{Error, Result};
 use crate::estimators::{Estimator, EstimatorSpec, Mean, validate_samples};
 use crate::limits::{self, MemoryLimit};
@@ -82,9 +82,9 @@ pub struct DistResult {
     /// Per checkpoint, what the law says about the plain mean's cell (`None` when the
     /// experiment does not run the mean).
     pub mean_laws: Vec<Option<MeanLaw>>,
-    /// Per cell (estimator-major, like `cells`), what trials with two outliers do to it, where
-    /// the run expects too few of them to see ([`pairs`]).
-    pub pair_effects: Vec<Option<PairEffect>>,
+    /// Per cell (estimator-major, like `cells`), what trials the run expects too few of to see
+    /// would do to it ([`unseen`]).
+    pub tail_effects: Vec<TailEffects>,
 }
 
 impl DistResult {
@@ -340,34 +340,34 @@ fn dist_result(
         state_bytes_max: total.state_bytes_max,
         state_bytes_sum: total.state_bytes_sum,
         mean_laws,
-        pair_effects: pair_effects(exp, d, build, trials),
+        tail_effects: tail_effects(exp, d, build, trials),
     }
 }
 
-/// [`pairs::effects`] of every checkpoint, laid out like the cells (estimator-major), from a
+/// [`unseen::effects`] of every checkpoint, laid out like the cells (estimator-major), from a
 /// stream of the experiment's seed, the label and n.
-fn pair_effects(
+fn tail_effects(
     exp: &Experiment,
     d: &Distribution,
     build: BuildFn,
     trials: u64,
-) -> Vec<Option<PairEffect>> {
+) -> Vec<TailEffects> {
     let cps = &exp.file.checkpoints;
-    let per_n: Vec<Vec<Option<PairEffect>>> = cps
+    let per_n: Vec<Vec<TailEffects>> = cps
         .par_iter()
         .map(|&n| {
             let seed = splitmix64(
                 splitmix64(exp.file.seed ^ fnv1a(&d.label)) ^ splitmix64(n as u64 ^ PAIR_STREAM),
             );
-            pairs::effects(d, &exp.estimators, build, n, trials, seed)
+            unseen::effects(d, &exp.estimators, build, n, trials, seed)
         })
         .collect();
     (0..exp.estimators.len())
-        .flat_map(|e| per_n.iter().map(move |v| v[e]))
+        .flat_map(|e| per_n.iter().map(move |v| v[e].clone()))
         .collect()
 }
 
-/// Salt of the streams of [`pairs::effects`].
+/// Salt of the streams of [`unseen::effects`].
 const PAIR_STREAM: u64 = 0x7061_6972_735f_6f75;
 
 /// Salt of the streams that simulate the law's null, apart from every trial's stream.

@@ -39,7 +39,7 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
                         metric,
                         &m,
                         mean_law,
-                        d.pair_effects[e * cps.len() + i].as_ref(),
+                        Some(&d.tail_effects[e * cps.len() + i]),
                         d.mu,
                         is_mean,
                         infinite_variance,
