@@ -1,9 +1,12 @@
-//! A bounding volume hierarchy over [`Primitive`]s: binned SAH build, flattened depth-first
-//! nodes of 32 bytes, iterative near-child-first traversal.
+//! A bounding volume hierarchy over [`Primitive`]s: a binned SAH binary build, collapsed into a
+//! 4-wide tree whose nodes hold their children's boxes as structure-of-arrays, so that one
+//! SSE2 operation per plane tests all four (glam's `Vec4`, baseline x86-64, no `unsafe`).
 //!
-//! Layout: an interior node's first child directly follows it and it stores the index of the
-//! second; a leaf stores the range of its (at most [`MAX_LEAF`]) primitives, which the build
-//! reorders so that every leaf's primitives are contiguous.
+//! Layout: the binary build reorders the primitives so that every leaf's (at most
+//! [`MAX_LEAF`]) are contiguous; the collapse then opens, in each 4-wide node, the binary
+//! child of largest area until four children remain. A child reference is an interior node's
+//! index or a leaf's primitive range ([`Child`]). Closest-hit traversal visits the children it
+//! hits nearest first; occlusion rays stop at the first hit.
 //!
 //! The slab test picks each axis' near and far plane by the sign bit of the direction, so a
 //! zero (or negative zero) component gives an infinite slab of the right sign; `0·∞ = NaN`
@@ -14,7 +17,7 @@
 
 use super::shapes::{Hit, Primitive, RawHit, Ray, RayPre};
 use arrayvec::ArrayVec;
-use glam::{BVec3A, Vec3, Vec3A};
+use glam::{Vec3, Vec4};
 
 /// Largest number of primitives in a leaf.
 pub const MAX_LEAF: usize = 4;
@@ -30,29 +33,73 @@ const TRAVERSAL_COST: f32 = 1.0;
 const MEDIAN_DEPTH: usize = 64;
 
 /// Traversal stack size: the median splits below [`MEDIAN_DEPTH`] halve the count, so at most
-/// 32 more levels follow.
-const STACK: usize = MEDIAN_DEPTH + 40;
+/// 32 more binary levels follow; a 4-wide node spans at least one of them and stacks at most
+/// three children.
+const STACK: usize = 3 * (MEDIAN_DEPTH + 40);
 
 /// `1 + 2γ₃` with `γₙ = nε/(1 − nε)`, `ε` half an ulp of one.
 const FAR_SCALE: f32 =
     1.0 + 2.0 * (3.0 * (f32::EPSILON * 0.5)) / (1.0 - 3.0 * (f32::EPSILON * 0.5));
 
-/// One node: bounds, then for a leaf the first primitive and the count, for an interior node
-/// the index of the second child and a count of 0.
+/// One node of the binary build: bounds, then for a leaf the first primitive and the count,
+/// for an interior node the index of the second child and a count of 0.
 #[derive(Debug, Clone, Copy)]
-#[repr(C, align(32))]
 struct Node {
     bounds: [Vec3; 2],
     offset: u32,
     count: u32,
 }
 
-const _: () = assert!(std::mem::size_of::<Node>() == 32);
+/// A child reference of a 4-wide node: an interior node's index, or (top bit set) a leaf's
+/// first primitive shifted left by 3 and its count in the low 3 bits. [`Child::EMPTY`] fills
+/// unused slots (whose boxes are empty, so no ray reaches them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Child(u32);
 
-/// The acceleration structure: flattened nodes over a flat, reordered primitive array.
+impl Child {
+    const LEAF: u32 = 1 << 31;
+    const EMPTY: Child = Child(u32::MAX);
+
+    fn leaf(first: usize, count: usize) -> Child {
+        assert!(
+            first < 1 << 28 && (1..=MAX_LEAF).contains(&count),
+            "BVH: more than 2^28 primitives"
+        );
+        Child(Self::LEAF | (first as u32) << 3 | count as u32)
+    }
+
+    #[inline(always)]
+    fn is_leaf(self) -> bool {
+        self.0 & Self::LEAF != 0
+    }
+
+    /// A leaf's primitive range.
+    #[inline(always)]
+    fn range(self) -> std::ops::Range<usize> {
+        let first = ((self.0 & !Self::LEAF) >> 3) as usize;
+        first..first + (self.0 & 7) as usize
+    }
+}
+
+/// A 4-wide node: the children's boxes as `[min x, min y, min z, max x, max y, max z]`, one
+/// lane per child, then the children. Two cache lines.
+#[derive(Debug, Clone, Copy)]
+#[repr(C, align(64))]
+struct Node4 {
+    planes: [Vec4; 6],
+    child: [Child; 4],
+}
+
+const _: () = assert!(std::mem::size_of::<Node4>() == 128);
+
+/// The acceleration structure: 4-wide nodes (the root first) over a flat, reordered
+/// primitive array.
 #[derive(Debug, Clone, Default)]
 pub struct Bvh {
-    nodes: Vec<Node>,
+    nodes: Vec<Node4>,
+    /// Set when everything is one leaf (then `nodes` is empty).
+    root_leaf: Option<Child>,
+    bounds: Option<(Vec3, Vec3)>,
     prims: Vec<Primitive>,
 }
 
@@ -103,54 +150,44 @@ impl Aabb {
 /// Per-ray traversal data.
 struct Trav {
     pre: RayPre,
-    o: Vec3A,
-    inv: Vec3A,
-    /// Lanes whose direction is negative (sign bit, so −0 counts): near plane is the max.
-    neg: BVec3A,
+    o: [Vec4; 3],
+    inv: [Vec4; 3],
+    /// Per axis, the index in [`Node4::planes`] of the near plane (the max when the direction
+    /// is negative: sign bit, so −0 counts) and of the far plane.
+    near: [usize; 3],
+    far: [usize; 3],
 }
 
 impl Trav {
     #[inline]
     fn new(ray: &Ray) -> Trav {
-        let inv = Vec3A::ONE / Vec3A::from(ray.d);
+        let inv = Vec3::ONE / ray.d;
+        let neg = |a: usize| usize::from(inv[a].is_sign_negative()) * 3;
         Trav {
             pre: RayPre::new(ray),
-            o: ray.o.into(),
-            inv,
-            neg: BVec3A::new(
-                inv.x.is_sign_negative(),
-                inv.y.is_sign_negative(),
-                inv.z.is_sign_negative(),
-            ),
+            o: [0, 1, 2].map(|a| Vec4::splat(ray.o[a])),
+            inv: [0, 1, 2].map(|a| Vec4::splat(inv[a])),
+            near: [0, 1, 2].map(|a| a + neg(a)),
+            far: [0, 1, 2].map(|a| a + 3 - neg(a)),
         }
     }
 
-    /// Entry distance of the node's box if the ray overlaps it within `[tmin, tmax]`.
+    /// The four children's entry distances, and a bit mask of those the ray overlaps within
+    /// `[tmin, tmax]`.
     #[inline(always)]
-    fn hit_box(&self, n: &Node, tmin: f32, tmax: f32) -> Option<f32> {
-        let t0 = (Vec3A::from(n.bounds[0]) - self.o) * self.inv;
-        let t1 = (Vec3A::from(n.bounds[1]) - self.o) * self.inv;
-        let near = Vec3A::select(self.neg, t1, t0);
-        let far = Vec3A::select(self.neg, t0, t1);
-        // A NaN lane (0·∞: the origin on a plane parallel to the ray) constrains nothing.
-        let near = Vec3A::select(near.cmpeq(near), near, Vec3A::NEG_INFINITY);
-        let far = Vec3A::select(far.cmpeq(far), far, Vec3A::INFINITY);
-        let t_near = fmax(near.max_element(), tmin);
-        let t_far = fmin(far.min_element() * FAR_SCALE, tmax);
-        (t_near <= t_far).then_some(t_near)
+    fn hit_boxes(&self, n: &Node4, tmin: f32, tmax: f32) -> (Vec4, u32) {
+        let mut t_near = Vec4::splat(tmin);
+        let mut t_far = Vec4::INFINITY;
+        for a in 0..3 {
+            let near = (n.planes[self.near[a]] - self.o[a]) * self.inv[a];
+            let far = (n.planes[self.far[a]] - self.o[a]) * self.inv[a];
+            // A NaN lane (0·∞: the origin on a plane parallel to the ray) constrains nothing.
+            t_near = Vec4::select(near.cmpgt(t_near), near, t_near);
+            t_far = Vec4::select(far.cmplt(t_far), far, t_far);
+        }
+        let t_far = (t_far * Vec4::splat(FAR_SCALE)).min(Vec4::splat(tmax));
+        (t_near, t_near.cmple(t_far).bitmask())
     }
-}
-
-/// Plain `max` (a single instruction; its operands are never NaN here).
-#[inline(always)]
-fn fmax(a: f32, b: f32) -> f32 {
-    if a > b { a } else { b }
-}
-
-/// Plain `min` (a single instruction; its operands are never NaN here).
-#[inline(always)]
-fn fmin(a: f32, b: f32) -> f32 {
-    if a < b { a } else { b }
 }
 
 impl Bvh {
@@ -172,8 +209,8 @@ impl Bvh {
                 }
             })
             .collect();
-        let mut nodes = Vec::with_capacity(2 * prims.len() / MAX_LEAF + 1);
-        build_node(&mut nodes, &mut items, 0, 0);
+        let mut binary = Vec::with_capacity(2 * prims.len() / MAX_LEAF + 1);
+        build_node(&mut binary, &mut items, 0, 0);
         let mut slots: Vec<Option<Primitive>> = prims.into_iter().map(Some).collect();
         let prims = items
             .iter()
@@ -183,7 +220,21 @@ impl Bvh {
                     .expect("each primitive once")
             })
             .collect();
-        Bvh { nodes, prims }
+        let root = &binary[0];
+        let bounds = Some((root.bounds[0], root.bounds[1]));
+        let mut nodes = Vec::with_capacity(binary.len() / 2 + 1);
+        let root_leaf = if root.count > 0 {
+            Some(Child::leaf(root.offset as usize, root.count as usize))
+        } else {
+            collapse(&binary, 0, &mut nodes);
+            None
+        };
+        Bvh {
+            nodes,
+            root_leaf,
+            bounds,
+            prims,
+        }
     }
 
     /// Number of primitives.
@@ -198,7 +249,7 @@ impl Bvh {
 
     /// Bounds `(min, max)` of everything, or `None` when empty.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        self.nodes.first().map(|n| (n.bounds[0], n.bounds[1]))
+        self.bounds
     }
 
     /// The primitives, in the build's order.
@@ -219,6 +270,33 @@ impl Bvh {
         self.traverse::<true>(ray, tmin, tmax, &mut best)
     }
 
+    /// Tests a leaf's primitives; with `ANY` returns at the first hit, otherwise keeps the
+    /// closest in `best` and lowers `t_best`. Returns whether anything was hit.
+    #[inline(always)]
+    fn leaf<const ANY: bool>(
+        &self,
+        leaf: Child,
+        pre: &RayPre,
+        tmin: f32,
+        t_best: &mut f32,
+        best: &mut Option<(usize, RawHit)>,
+    ) -> bool {
+        let range = leaf.range();
+        let first = range.start;
+        let mut any = false;
+        for (i, p) in self.prims[range].iter().enumerate() {
+            if let Some(h) = p.intersect_raw(pre, tmin, *t_best) {
+                if ANY {
+                    return true;
+                }
+                any = true;
+                *t_best = h.t;
+                *best = Some((first + i, h));
+            }
+        }
+        any
+    }
+
     /// Walks the tree; with `ANY` returns at the first hit, otherwise keeps the closest in
     /// `best`. Returns whether anything was hit.
     #[inline(always)]
@@ -229,68 +307,123 @@ impl Bvh {
         tmax: f32,
         best: &mut Option<(usize, RawHit)>,
     ) -> bool {
-        let Some(root) = self.nodes.first() else {
-            return false;
-        };
-        let tr = Trav::new(ray);
-        let mut t_best = tmax;
-        if tr.hit_box(root, tmin, t_best).is_none() {
+        if self.prims.is_empty() {
             return false;
         }
-        // ArrayVec: no zero-fill of the whole stack on every ray (that memset was 3% of a
-        // render's instructions).
-        let mut stack: ArrayVec<(u32, f32), STACK> = ArrayVec::new();
-        let mut node = 0usize;
+        let tr = Trav::new(ray);
+        let mut t_best = tmax;
+        if let Some(leaf) = self.root_leaf {
+            return self.leaf::<ANY>(leaf, &tr.pre, tmin, &mut t_best, best);
+        }
+        // ArrayVec: no zero-fill of the whole stack on every ray.
+        let mut stack: ArrayVec<(Child, f32), STACK> = ArrayVec::new();
+        let mut next = Child(0);
         loop {
-            let n = &self.nodes[node];
-            if n.count > 0 {
-                let first = n.offset as usize;
-                for (i, p) in self.prims[first..first + n.count as usize]
-                    .iter()
-                    .enumerate()
-                {
-                    if let Some(h) = p.intersect_raw(&tr.pre, tmin, t_best) {
-                        if ANY {
-                            return true;
-                        }
-                        t_best = h.t;
-                        *best = Some((first + i, h));
-                    }
+            if next.is_leaf() {
+                if self.leaf::<ANY>(next, &tr.pre, tmin, &mut t_best, best) && ANY {
+                    return true;
                 }
             } else {
-                let (l, r) = (node + 1, n.offset as usize);
-                let hl = tr.hit_box(&self.nodes[l], tmin, t_best);
-                let hr = tr.hit_box(&self.nodes[r], tmin, t_best);
-                match (hl, hr) {
-                    (Some(tl), Some(tr_)) => {
-                        let (near, far, tfar) = if tl <= tr_ { (l, r, tr_) } else { (r, l, tl) };
-                        stack.push((far as u32, tfar));
-                        node = near;
+                let n = &self.nodes[next.0 as usize];
+                let (t_near, mut mask) = tr.hit_boxes(n, tmin, t_best);
+                if mask != 0 {
+                    let t = t_near.to_array();
+                    if ANY {
+                        // Any order will do: descend into the first, stack the others.
+                        next = n.child[mask.trailing_zeros() as usize];
+                        mask &= mask - 1;
+                        while mask != 0 {
+                            let k = mask.trailing_zeros() as usize;
+                            stack.push((n.child[k], t[k]));
+                            mask &= mask - 1;
+                        }
                         continue;
                     }
-                    (Some(_), None) => {
-                        node = l;
-                        continue;
+                    // Nearest first: sort the (at most four) hits by entry distance, stack all
+                    // but the nearest farthest-first.
+                    let mut hits: ArrayVec<(f32, Child), 4> = ArrayVec::new();
+                    while mask != 0 {
+                        let k = mask.trailing_zeros() as usize;
+                        let mut j = hits.len();
+                        hits.push((t[k], n.child[k]));
+                        while j > 0 && hits[j - 1].0 < hits[j].0 {
+                            hits.swap(j - 1, j);
+                            j -= 1;
+                        }
+                        mask &= mask - 1;
                     }
-                    (None, Some(_)) => {
-                        node = r;
-                        continue;
+                    let (_, nearest) = hits.pop().expect("a hit");
+                    for &(t, c) in &hits {
+                        stack.push((c, t));
                     }
-                    (None, None) => {}
+                    next = nearest;
+                    continue;
                 }
             }
             // Pop the next box that may still hold something nearer.
             loop {
-                let Some((nd, t_enter)) = stack.pop() else {
+                let Some((c, t_enter)) = stack.pop() else {
                     return best.is_some();
                 };
                 if t_enter <= t_best {
-                    node = nd as usize;
+                    next = c;
                     break;
                 }
             }
         }
     }
+}
+
+/// Appends the 4-wide node of the binary interior node `b` (and, after it, its subtrees);
+/// returns its index. Opens the binary child of largest area until four children remain.
+fn collapse(binary: &[Node], b: usize, out: &mut Vec<Node4>) -> u32 {
+    let mut kids: ArrayVec<usize, 4> = ArrayVec::new();
+    kids.push(b + 1);
+    kids.push(binary[b].offset as usize);
+    while kids.len() < 4 {
+        let area = |i: usize| {
+            let n = &binary[i];
+            Aabb {
+                lo: n.bounds[0],
+                hi: n.bounds[1],
+            }
+            .half_area()
+        };
+        let Some(k) = (0..kids.len())
+            .filter(|&k| binary[kids[k]].count == 0)
+            .max_by(|&x, &y| area(kids[x]).total_cmp(&area(kids[y])))
+        else {
+            break;
+        };
+        let i = kids[k];
+        kids[k] = i + 1;
+        kids.insert(k + 1, binary[i].offset as usize);
+    }
+    let me = out.len();
+    out.push(Node4 {
+        planes: [
+            Vec4::INFINITY,
+            Vec4::INFINITY,
+            Vec4::INFINITY,
+            Vec4::NEG_INFINITY,
+            Vec4::NEG_INFINITY,
+            Vec4::NEG_INFINITY,
+        ],
+        child: [Child::EMPTY; 4],
+    });
+    for (k, &i) in kids.iter().enumerate() {
+        let n = &binary[i];
+        for a in 0..3 {
+            out[me].planes[a][k] = n.bounds[0][a];
+            out[me].planes[a + 3][k] = n.bounds[1][a];
+        }
+        out[me].child[k] = if n.count > 0 {
+            Child::leaf(n.offset as usize, n.count as usize)
+        } else {
+            Child(collapse(binary, i, out))
+        };
+    }
+    me as u32
 }
 
 /// Builds the subtree over `items` (whose first element is primitive number `first` in the
