@@ -3,7 +3,7 @@
 //! an incomplete `--update`) instead of passing it.
 
 use fireflies::Result;
-use fireflies::estimators::{Estimator, EstimatorSpec, Extras};
+use fireflies::estimators::{Estimator, EstimatorSpec, Extras, MeanSpec};
 use fireflies::harness::gate::{self, GateConfig, Identity, Snapshot};
 use fireflies::harness::metrics::Metric;
 use fireflies::harness::{self, Experiment, RunOptions, runner};
@@ -111,7 +111,7 @@ impl Estimator for Broken {
 fn mean_biased_one_percent(spec: &EstimatorSpec) -> Result<Box<dyn Estimator>> {
     let inner = spec.build()?;
     Ok(match spec {
-        EstimatorSpec::Mean => Box::new(Broken::new(inner, 1.01, 0.0)),
+        EstimatorSpec::Mean(MeanSpec) => Box::new(Broken::new(inner, 1.01, 0.0)),
         _ => inner,
     })
 }
@@ -129,7 +129,7 @@ fn clamp_fireflies_doubled(spec: &EstimatorSpec) -> Result<Box<dyn Estimator>> {
 /// Both defects at once (the CI-sized test runs the gate once).
 fn both_defects(spec: &EstimatorSpec) -> Result<Box<dyn Estimator>> {
     match spec {
-        EstimatorSpec::Mean => mean_biased_one_percent(spec),
+        EstimatorSpec::Mean(MeanSpec) => mean_biased_one_percent(spec),
         _ => clamp_fireflies_doubled(spec),
     }
 }

@@ -13,7 +13,10 @@
 //! the code path the spec examples already pin.
 
 use fireflies::estimators::zirr::MIN_UNIT;
-use fireflies::estimators::{Estimator, EstimatorSpec, Extra, ZirrParams, build_rgb};
+use fireflies::estimators::{
+    ClampSpec, Estimator, EstimatorSpec, Extra, JungSpec, ZirrParams, ZirrRefSpec, ZirrSpec,
+    build_rgb,
+};
 use proptest::prelude::*;
 use proptest::test_runner::Config;
 
@@ -66,7 +69,7 @@ fn is_mean_like(spec: &str) -> bool {
 /// (`2.2e-16` for three values with f64::MAX's mantissa, at any scale): see [`assert_even`].
 fn exact_for_equal(spec: &str, x: f64) -> Option<f64> {
     match parse(spec) {
-        EstimatorSpec::Clamp { c } => Some(x.min(c)),
+        EstimatorSpec::Clamp(ClampSpec { c }) => Some(x.min(c)),
         _ if is_mean_like(spec) => Some(x),
         _ => None,
     }
@@ -104,26 +107,26 @@ fn estimate(spec: &EstimatorSpec, xs: &[f64]) -> f64 {
 /// `spec` with its scale parameters (`c`, `σ_image`, `u`) multiplied by `factor`.
 fn rescaled(spec: &EstimatorSpec, factor: f64) -> EstimatorSpec {
     match *spec {
-        EstimatorSpec::Clamp { c } => EstimatorSpec::Clamp { c: c * factor },
-        EstimatorSpec::Jung { sigma_image, m_max } => EstimatorSpec::Jung {
+        EstimatorSpec::Clamp(ClampSpec { c }) => EstimatorSpec::Clamp(ClampSpec { c: c * factor }),
+        EstimatorSpec::Jung(JungSpec { sigma_image, m_max }) => EstimatorSpec::Jung(JungSpec {
             sigma_image: sigma_image * factor,
             m_max,
-        },
-        EstimatorSpec::Zirr(p) => EstimatorSpec::Zirr(ZirrParams {
+        }),
+        EstimatorSpec::Zirr(ZirrSpec(p)) => EstimatorSpec::Zirr(ZirrSpec(ZirrParams {
             u: p.u * factor,
             ..p
-        }),
-        EstimatorSpec::ZirrRef(p) => EstimatorSpec::ZirrRef(ZirrParams {
+        })),
+        EstimatorSpec::ZirrRef(ZirrRefSpec(p)) => EstimatorSpec::ZirrRef(ZirrRefSpec(ZirrParams {
             u: p.u * factor,
             ..p
-        }),
+        })),
         other => other,
     }
 }
 
 /// Whether the estimate is a ratio that does not scale with the samples.
 fn is_scale_free(spec: &EstimatorSpec) -> bool {
-    matches!(spec, EstimatorSpec::Gini { .. })
+    matches!(spec, EstimatorSpec::Gini(_))
 }
 
 /// The estimate on `xs` scaled by `2^k` (scale parameters too), scaled back by `2^-k`.

@@ -7,7 +7,8 @@
 //! crate must agree with it bit for bit.
 
 use fireflies::estimators::{
-    Bank, Clamp, Estimator, EstimatorSpec, Extra, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon,
+    Bank, Clamp, ClampSpec, Estimator, EstimatorSpec, Extra, GiniDiagnostic, GiniSpec, Gmon, GmonB,
+    GmonBSpec, GmonSpec, Jung, JungSpec, Mean, MeanSpec, Mon, MonSpec,
 };
 use proptest::prelude::*;
 use proptest::test_runner::Config;
@@ -203,13 +204,13 @@ fn any_usize() -> impl Strategy<Value = usize> {
 /// Every estimator of this file's scope, as spec strings with parameters derived from `m`.
 fn specs(m: usize, clamp_c: f64, sigma_image: f64, m_max: usize, t: f64) -> Vec<EstimatorSpec> {
     vec![
-        EstimatorSpec::Mean,
-        EstimatorSpec::Clamp { c: clamp_c },
-        EstimatorSpec::Mon { m },
-        EstimatorSpec::Gini { m },
-        EstimatorSpec::GmonB { m, threshold: t },
-        EstimatorSpec::Gmon { m },
-        EstimatorSpec::Jung { sigma_image, m_max },
+        EstimatorSpec::Mean(MeanSpec),
+        EstimatorSpec::Clamp(ClampSpec { c: clamp_c }),
+        EstimatorSpec::Mon(MonSpec { m }),
+        EstimatorSpec::Gini(GiniSpec { m }),
+        EstimatorSpec::GmonB(GmonBSpec { m, threshold: t }),
+        EstimatorSpec::Gmon(GmonSpec { m }),
+        EstimatorSpec::Jung(JungSpec { sigma_image, m_max }),
     ]
 }
 
@@ -311,7 +312,7 @@ proptest! {
         // Valid values must parse and build.
         if x.is_finite() && x > 0.0 {
             let spec: EstimatorSpec = format!("clamp:c={x}").parse().unwrap();
-            prop_assert_eq!(spec, EstimatorSpec::Clamp { c: x });
+            prop_assert_eq!(spec, EstimatorSpec::Clamp(ClampSpec { c: x }));
             prop_assert!(spec.build().is_ok());
         }
     }
@@ -475,11 +476,11 @@ proptest! {
         let (lo, hi) = min_max(&xs);
         let tol = 1e-15;
         for spec in [
-            EstimatorSpec::Mon { m },
-            EstimatorSpec::Gmon { m },
-            EstimatorSpec::GmonB { m, threshold: t },
-            EstimatorSpec::Jung { sigma_image, m_max },
-            EstimatorSpec::Mean,
+            EstimatorSpec::Mon(MonSpec { m }),
+            EstimatorSpec::Gmon(GmonSpec { m }),
+            EstimatorSpec::GmonB(GmonBSpec { m, threshold: t }),
+            EstimatorSpec::Jung(JungSpec { sigma_image, m_max }),
+            EstimatorSpec::Mean(MeanSpec),
         ] {
             let e = est(&spec, &xs);
             prop_assert!(
@@ -488,13 +489,13 @@ proptest! {
             );
         }
         let c = hi / 2.0 + 1e-9;
-        let e = est(&EstimatorSpec::Clamp { c }, &xs);
+        let e = est(&EstimatorSpec::Clamp(ClampSpec { c }), &xs);
         prop_assert!(e >= lo.min(c) * (1.0 - tol) && e <= c * (1.0 + tol), "clamp {:?} = {:?}", c, e);
     }
 
     #[test]
     fn gini_lies_in_zero_one(xs in samples(), m in m_sets()) {
-        let g = est(&EstimatorSpec::Gini { m }, &xs);
+        let g = est(&EstimatorSpec::Gini(GiniSpec { m }), &xs);
         prop_assert!((0.0..1.0).contains(&g), "Gini = {:?}", g);
         // The bound 1 - 1/K is attained only with a single non-zero set mean.
         let k = m.min(xs.len()) as f64;
@@ -526,7 +527,7 @@ proptest! {
         let scaled = specs(m, c * s, sigma_image * s, m_max, t);
         for (a, b) in plain.iter().zip(&scaled) {
             let (ea, eb) = (fed(a, &xs), fed(b, &ys));
-            let factor = if matches!(a, EstimatorSpec::Gini { .. }) { 1.0 } else { s };
+            let factor = if matches!(a, EstimatorSpec::Gini(_)) { 1.0 } else { s };
             prop_assert_eq!(
                 (ea.estimate().unwrap() * factor).to_bits(),
                 eb.estimate().unwrap().to_bits(),
@@ -565,10 +566,10 @@ proptest! {
             let (ea, eb) = (fed(&a, &xs), fed(&b, &ys));
             let (va, vb) = (ea.estimate().unwrap(), eb.estimate().unwrap());
             match a {
-                EstimatorSpec::Gini { .. } => {
+                EstimatorSpec::Gini(_) => {
                     prop_assert!((va - vb).abs() <= REL, "Gini {:?} vs {:?}", va, vb);
                 }
-                EstimatorSpec::Gmon { .. } => {
+                EstimatorSpec::Gmon(_) => {
                     let (ta, tb) = (extra(ea.as_ref(), "trimmed"), extra(eb.as_ref(), "trimmed"));
                     if ta == tb {
                         prop_assert!(close(va * s, vb), "{}: {:?}*{} vs {:?}", a, va, s, vb);
@@ -578,7 +579,7 @@ proptest! {
                         prop_assert!((gk - gk.round()).abs() < NEAR, "trimming flipped far from a boundary: G*k = {:?}", gk);
                     }
                 }
-                EstimatorSpec::GmonB { threshold, .. } => {
+                EstimatorSpec::GmonB(GmonBSpec { threshold, .. }) => {
                     let (fa, fb) = (extra(ea.as_ref(), "used_mon"), extra(eb.as_ref(), "used_mon"));
                     if fa == fb {
                         prop_assert!(close(va * s, vb), "{}: {:?}*{} vs {:?}", a, va, s, vb);
@@ -587,7 +588,7 @@ proptest! {
                         prop_assert!((g - threshold).abs() < NEAR, "switch flipped with G = {:?}, t = {:?}", g, threshold);
                     }
                 }
-                EstimatorSpec::Jung { .. } => {
+                EstimatorSpec::Jung(_) => {
                     let (ma, mb) = (extra(ea.as_ref(), "M"), extra(eb.as_ref(), "M"));
                     if ma == mb {
                         prop_assert!(close(va * s, vb), "{}: {:?}*{} vs {:?}", a, va, s, vb);
@@ -721,7 +722,7 @@ proptest! {
 
     #[test]
     fn bank_single_push_rejects_bad_samples(xs in samples(), bad in prop::sample::select(vec![f64::NAN, f64::INFINITY, -0.5])) {
-        let mut bank = Bank::new(&[EstimatorSpec::Mean, EstimatorSpec::Gmon { m: 5 }]).unwrap();
+        let mut bank = Bank::new(&[EstimatorSpec::Mean(MeanSpec), EstimatorSpec::Gmon(GmonSpec { m: 5 })]).unwrap();
         for &x in &xs {
             bank.push(x).unwrap();
         }

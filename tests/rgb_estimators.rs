@@ -4,8 +4,9 @@
 //! Jung's image mode, the memory the module documents, and the edge cases.
 
 use fireflies::estimators::{
-    Estimator, EstimatorSpec, Extra, Jung, Neumaier, PajotAdr, PajotHybrid, PajotRot, REC709,
-    RgbEstimator, Zirr, ZirrRef, build_rgb, luminance,
+    Estimator, EstimatorSpec, Extra, Jung, Neumaier, PajotAdr, PajotAdrSpec, PajotHybrid,
+    PajotHybridSpec, PajotRot, PajotRotSpec, REC709, RgbEstimator, Zirr, ZirrRefSpec, ZirrSpec,
+    build_rgb, luminance,
 };
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -411,17 +412,17 @@ fn accepted_mean(px: &[[f64; 3]], m: f64) -> [f64; 3] {
 /// The scalar bound `m` of the Pajot estimator `s` after the luminances `l`.
 fn pajot_bound(s: &str, l: &[f64]) -> f64 {
     match spec(s) {
-        EstimatorSpec::PajotRot { learn } => {
+        EstimatorSpec::PajotRot(PajotRotSpec { learn }) => {
             let mut p = PajotRot::new(learn).unwrap();
             p.push_slice(l);
             p.bound()
         }
-        EstimatorSpec::PajotAdr { learn } => {
+        EstimatorSpec::PajotAdr(PajotAdrSpec { learn }) => {
             let mut p = PajotAdr::new(learn).unwrap();
             p.push_slice(l);
             p.bound()
         }
-        EstimatorSpec::PajotHybrid { learn, t, delta } => {
+        EstimatorSpec::PajotHybrid(PajotHybridSpec { learn, t, delta }) => {
             let mut p = PajotHybrid::new(learn, t, delta).unwrap();
             p.push_slice(l);
             p.bound()
@@ -545,16 +546,16 @@ fn zirr_block_estimate_is_the_scalar_block_estimate_in_luminance() {
                 std::array::from_fn(|k| present[k].then(|| pixels[k].as_ref()));
             let got = luminance(pixels[4].block_estimate(&block).unwrap());
             let want = if s.starts_with("zirr-ref") {
-                let lum: Vec<ZirrRef> = streams
+                let lum: Vec<Zirr> = streams
                     .iter()
                     .map(|p| {
-                        let mut z = ZirrRef::new(zirr_params(s)).unwrap();
+                        let mut z = Zirr::reference(zirr_params(s)).unwrap();
                         z.push_slice(&lums(p));
                         z
                     })
                     .collect();
-                let b: [Option<&ZirrRef>; 9] = std::array::from_fn(|k| present[k].then(|| &lum[k]));
-                ZirrRef::block_estimate(&b).unwrap().0
+                let b: [Option<&Zirr>; 9] = std::array::from_fn(|k| present[k].then(|| &lum[k]));
+                Zirr::block_estimate(&b).unwrap().0
             } else {
                 let lum: Vec<Zirr> = streams
                     .iter()
@@ -574,7 +575,7 @@ fn zirr_block_estimate_is_the_scalar_block_estimate_in_luminance() {
 
 fn zirr_params(s: &str) -> fireflies::estimators::ZirrParams {
     match spec(s) {
-        EstimatorSpec::Zirr(p) | EstimatorSpec::ZirrRef(p) => p,
+        EstimatorSpec::Zirr(ZirrSpec(p)) | EstimatorSpec::ZirrRef(ZirrRefSpec(p)) => p,
         other => panic!("{other} is not a Zirr spec"),
     }
 }

@@ -7,7 +7,8 @@
 
 use fireflies::Error;
 use fireflies::estimators::{
-    Bank, Clamp, Estimator, EstimatorSpec, Extra, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon,
+    Bank, Clamp, ClampSpec, Estimator, EstimatorSpec, Extra, GiniDiagnostic, GiniSpec, Gmon, GmonB,
+    GmonBSpec, GmonSpec, Jung, JungSpec, Mean, MeanSpec, Mon, MonSpec,
 };
 
 mod common;
@@ -367,24 +368,27 @@ fn omitted_keys_take_defaults_and_keys_come_in_any_order() {
 
 #[test]
 fn spec_variants_carry_the_parameters() {
-    assert_eq!(parse("mean"), EstimatorSpec::Mean);
-    assert_eq!(parse("clamp:c=10"), EstimatorSpec::Clamp { c: 10.0 });
-    assert_eq!(parse("mon:M=21"), EstimatorSpec::Mon { m: 21 });
-    assert_eq!(parse("gini:M=21"), EstimatorSpec::Gini { m: 21 });
-    assert_eq!(parse("gmon:M=21"), EstimatorSpec::Gmon { m: 21 });
+    assert_eq!(parse("mean"), EstimatorSpec::Mean(MeanSpec));
+    assert_eq!(
+        parse("clamp:c=10"),
+        EstimatorSpec::Clamp(ClampSpec { c: 10.0 })
+    );
+    assert_eq!(parse("mon:M=21"), EstimatorSpec::Mon(MonSpec { m: 21 }));
+    assert_eq!(parse("gini:M=21"), EstimatorSpec::Gini(GiniSpec { m: 21 }));
+    assert_eq!(parse("gmon:M=21"), EstimatorSpec::Gmon(GmonSpec { m: 21 }));
     assert_eq!(
         parse("gmonb:M=21"),
-        EstimatorSpec::GmonB {
+        EstimatorSpec::GmonB(GmonBSpec {
             m: 21,
             threshold: 0.25
-        }
+        })
     );
     assert_eq!(
         parse("jung:sigma_image=0.5"),
-        EstimatorSpec::Jung {
+        EstimatorSpec::Jung(JungSpec {
             sigma_image: 0.5,
             m_max: 17
-        }
+        })
     );
 }
 

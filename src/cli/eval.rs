@@ -5,7 +5,7 @@
 //! This format is documented in the README and kept stable.
 
 use clap::Args;
-use fireflies::estimators::{Estimator, EstimatorSpec, Extras, Zirr, ZirrRef};
+use fireflies::estimators::{Estimator, EstimatorSpec, Extras, Zirr, ZirrRefSpec, ZirrSpec};
 use fireflies::{Error, Result, samples};
 use std::fs::File;
 use std::io::{self, BufReader, Write};
@@ -92,19 +92,20 @@ impl<'a> Input<'a> {
 enum Job {
     Centre(Box<dyn Estimator>),
     Zirr(Vec<Zirr>),
-    ZirrRef(Vec<ZirrRef>),
 }
 
 impl Job {
     /// The job of `spec` over `slots` slots; Zirr's estimators read every slot in block mode.
     fn new(spec: &EstimatorSpec, slots: usize, block_mode: bool) -> Result<Job> {
         Ok(match *spec {
-            EstimatorSpec::Zirr(p) if block_mode => {
+            EstimatorSpec::Zirr(ZirrSpec(p)) if block_mode => {
                 Job::Zirr((0..slots).map(|_| Zirr::new(p)).collect::<Result<_>>()?)
             }
-            EstimatorSpec::ZirrRef(p) if block_mode => {
-                Job::ZirrRef((0..slots).map(|_| ZirrRef::new(p)).collect::<Result<_>>()?)
-            }
+            EstimatorSpec::ZirrRef(ZirrRefSpec(p)) if block_mode => Job::Zirr(
+                (0..slots)
+                    .map(|_| Zirr::reference(p))
+                    .collect::<Result<_>>()?,
+            ),
             _ => Job::Centre(spec.build()?),
         })
     }
@@ -118,7 +119,6 @@ impl Job {
                 }
             }
             Job::Zirr(pixels) => at.iter().for_each(|&i| pixels[i].push_slice(block)),
-            Job::ZirrRef(pixels) => at.iter().for_each(|&i| pixels[i].push_slice(block)),
         }
     }
 
@@ -127,9 +127,6 @@ impl Job {
         match self {
             Job::Centre(e) => Ok(json_line(text, e.count(), e.estimate()?, &e.extras())),
             Job::Zirr(pixels) => block_line(text, pixels, counts, centre, Zirr::block_estimate),
-            Job::ZirrRef(pixels) => {
-                block_line(text, pixels, counts, centre, ZirrRef::block_estimate)
-            }
         }
     }
 }

@@ -3,9 +3,31 @@
 //! methods must beat.
 
 use super::numeric::ScaledSum;
-use super::{Estimator, EstimatorSpec, empty};
+use super::rgb::per_channel;
+use super::{Estimator, EstimatorSpec, Key, Method, RgbEstimator, empty};
 use crate::error::{Error, Result};
 use std::fmt;
+
+/// `clamp:c=` (required).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClampSpec {
+    /// Clamping threshold.
+    pub c: f64,
+}
+
+impl Method for ClampSpec {
+    const NAME: &'static str = "clamp";
+    const KEYS: &'static [Key<Self>] = &[Key::required(Key::float("c", |s| &mut s.c))];
+    const DEFAULT: Self = ClampSpec { c: f64::NAN };
+
+    fn build(&self) -> Result<Box<dyn Estimator>> {
+        Ok(Box::new(Clamp::new(self.c)?))
+    }
+
+    fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
+        per_channel(|| Clamp::new(self.c))
+    }
+}
 
 /// Mean of `min(S, c)`.
 #[derive(Debug, Clone)]
@@ -70,7 +92,7 @@ impl Estimator for Clamp {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::Clamp { c: self.c }
+        ClampSpec { c: self.c }.into()
     }
 
     fn reset(&mut self) {

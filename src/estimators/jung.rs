@@ -12,12 +12,42 @@
 //! [`Partition`]), so the estimate itself is finite for any finite samples.
 
 use super::mon::{Partition, median_sorted};
-use super::{Estimator, EstimatorSpec, Extra, Extras, Welford, empty};
+use super::rgb::per_channel;
+use super::{Estimator, EstimatorSpec, Extra, Extras, Key, Method, RgbEstimator, Welford, empty};
 use crate::error::{Error, Result};
 use std::fmt;
 
 /// Largest accepted `m_max`: the state holds `((m_max+1)/2)^2` sets, 262 KB at this cap.
 pub const MAX_M_MAX: usize = 255;
+
+/// `jung:sigma_image=,m_max=` (`sigma_image` required, `m_max` 17 by default).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JungSpec {
+    /// Standard deviation of the image's samples.
+    pub sigma_image: f64,
+    /// Largest M (odd).
+    pub m_max: usize,
+}
+
+impl Method for JungSpec {
+    const NAME: &'static str = "jung";
+    const KEYS: &'static [Key<Self>] = &[
+        Key::required(Key::float("sigma_image", |s| &mut s.sigma_image)),
+        Key::int("m_max", |s| &mut s.m_max),
+    ];
+    const DEFAULT: Self = JungSpec {
+        sigma_image: f64::NAN,
+        m_max: 17,
+    };
+
+    fn build(&self) -> Result<Box<dyn Estimator>> {
+        Ok(Box::new(Jung::new(self.sigma_image, self.m_max)?))
+    }
+
+    fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
+        per_channel(|| Jung::new(self.sigma_image, self.m_max))
+    }
+}
 
 /// MoN whose M is chosen from the ratio of the pixel's and the image's sample spread.
 #[derive(Debug, Clone)]
@@ -154,10 +184,19 @@ impl Estimator for Jung {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::Jung {
+        JungSpec {
             sigma_image: self.sigma_image,
             m_max: self.m_max,
         }
+        .into()
+    }
+
+    fn uses_image_sigma(&self) -> bool {
+        true
+    }
+
+    fn set_image_sigma(&mut self, sigma: f64) -> Result<()> {
+        self.set_sigma_image(sigma)
     }
 
     fn reset(&mut self) {

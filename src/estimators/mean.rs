@@ -3,9 +3,28 @@
 //! sum's rescaling keeps it finite for any finite samples (`[1e308; 3]` has mean `1e308`).
 
 use super::numeric::ScaledSum;
-use super::{Estimator, EstimatorSpec, empty};
+use super::rgb::per_channel;
+use super::{Estimator, EstimatorSpec, Key, Method, RgbEstimator, empty};
 use crate::error::Result;
 use std::fmt;
+
+/// `mean`: no keys.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeanSpec;
+
+impl Method for MeanSpec {
+    const NAME: &'static str = "mean";
+    const KEYS: &'static [Key<Self>] = &[];
+    const DEFAULT: Self = MeanSpec;
+
+    fn build(&self) -> Result<Box<dyn Estimator>> {
+        Ok(Box::new(Mean::new()))
+    }
+
+    fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
+        per_channel(|| Ok(Mean::new()))
+    }
+}
 
 /// Neumaier sum of the samples divided by their count.
 #[derive(Debug, Clone, Default)]
@@ -55,7 +74,7 @@ impl Estimator for Mean {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::Mean
+        EstimatorSpec::Mean(MeanSpec)
     }
 
     fn reset(&mut self) {

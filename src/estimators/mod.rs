@@ -19,16 +19,34 @@ mod rgb;
 mod spec;
 pub mod zirr;
 
+spec::methods! {
+    Mean(mean::MeanSpec),
+    Clamp(clamp::ClampSpec),
+    Mon(mon::MonSpec),
+    Gini(mon::GiniSpec),
+    GmonB(mon::GmonBSpec),
+    Gmon(mon::GmonSpec),
+    Jung(jung::JungSpec),
+    Zirr(zirr::ZirrSpec),
+    ZirrRef(zirr::ZirrRefSpec),
+    PajotRot(pajot::PajotRotSpec),
+    PajotAdr(pajot::PajotAdrSpec),
+    PajotHybrid(pajot::PajotHybridSpec),
+}
+
 pub use bank::{Bank, validate_samples};
 pub use clamp::Clamp;
 pub use jung::Jung;
 pub use mean::Mean;
 pub use mon::{GiniDiagnostic, Gmon, GmonB, Mon, Partition, gini};
 pub use numeric::{Neumaier, Welford};
-pub use pajot::{PajotAdr, PajotHybrid, PajotMode, PajotRot, adr_bandwidths};
+pub use pajot::{
+    AdrBound, BoundStrategy, HybridBound, Pajot, PajotAdr, PajotHybrid, PajotMode, PajotRot,
+    RotBound, adr_bandwidths,
+};
 pub use rgb::{REC709, RgbEstimator, build_rgb, luminance};
-pub use spec::{CONSTANT_MEMORY_SET, CascadeSize, EstimatorSpec, ZirrParams};
-pub use zirr::{Zirr, ZirrRef};
+pub use spec::{CONSTANT_MEMORY_SET, CascadeSize, Key, Method};
+pub use zirr::{Zirr, ZirrParams};
 
 use crate::error::Result;
 use std::fmt;
@@ -82,6 +100,19 @@ pub trait Estimator: Send + Sync + fmt::Display {
 
     /// Forgets every sample, keeping the parameters (lets a harness reuse allocations).
     fn reset(&mut self);
+
+    /// Whether the estimator reads the image's sample spread `σ_image` (Jung's image mode,
+    /// docs/estimators.md §4): an optional capability, false by default.
+    fn uses_image_sigma(&self) -> bool {
+        false
+    }
+
+    /// Sets the image's spread `σ_image` (finite, `≥ 0`) where
+    /// [`Estimator::uses_image_sigma`]; a no-op otherwise.
+    fn set_image_sigma(&mut self, sigma: f64) -> Result<()> {
+        let _ = sigma;
+        Ok(())
+    }
 }
 
 /// The error for an estimate requested before any sample arrived.

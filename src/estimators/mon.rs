@@ -8,7 +8,8 @@
 //! the median, Gini, `k` and `c`, K is used; the two differ only while `n < M`.
 
 use super::numeric::{ScaledSum, ScaledSums};
-use super::{Estimator, EstimatorSpec, Extra, Extras, Neumaier, empty};
+use super::rgb::per_channel;
+use super::{Estimator, EstimatorSpec, Extra, Extras, Key, Method, Neumaier, RgbEstimator, empty};
 use crate::error::{Error, Result};
 use arrayvec::ArrayVec;
 use std::fmt;
@@ -262,18 +263,46 @@ pub fn gini_trimmed_mean(theta: &[f64], g: f64) -> (f64, usize) {
     (mean, c)
 }
 
+/// An estimator over one partition, its spec type `$spec` (spec string `$key:M=`, `M`
+/// required) and the spec's [`Method`] declaration.
 macro_rules! partition_estimator {
-    ($(#[$doc:meta])* $name:ident) => {
+    ($(#[$doc:meta])* $name:ident, $spec:ident, $key:literal) => {
         $(#[$doc])*
         #[derive(Debug, Clone)]
         pub struct $name {
             part: Partition,
         }
 
+        #[doc = concat!("`", $key, ":M=`: the number of sets (required).")]
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        pub struct $spec {
+            /// Number of sets.
+            pub m: usize,
+        }
+
+        impl Method for $spec {
+            const NAME: &'static str = $key;
+            const KEYS: &'static [Key<Self>] = &[Key::required(Key::int("M", |s| &mut s.m))];
+            const DEFAULT: Self = $spec { m: 0 };
+
+            fn build(&self) -> Result<Box<dyn Estimator>> {
+                Ok(Box::new($name::new(self.m)?))
+            }
+
+            fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
+                per_channel(|| $name::new(self.m))
+            }
+        }
+
         impl $name {
             /// An estimator over `m` sets; `m` must be in `1..=MAX_SETS`.
             pub fn new(m: usize) -> Result<Self> {
                 Ok($name { part: Partition::new(m)? })
+            }
+
+            /// The spec this estimator was built from.
+            fn spec_of(&self) -> EstimatorSpec {
+                $spec { m: self.part.sets() }.into()
             }
 
             fn sorted_means(&self) -> Result<Vec<f64>> {
@@ -315,16 +344,22 @@ macro_rules! partition_common {
 
 partition_estimator!(
     /// Median of means ([B] eq. 2). With `M = 1` it is bit-identical to the mean.
-    Mon
+    Mon,
+    MonSpec,
+    "mon"
 );
 partition_estimator!(
     /// The Gini coefficient of the MoN set means as an "estimate": a diagnostic of how
     /// unequal the sets are, the quantity G-MoN adapts to.
-    GiniDiagnostic
+    GiniDiagnostic,
+    GiniSpec,
+    "gini"
 );
 partition_estimator!(
     /// G-MoN ([B] eq. 6): a trimmed mean of the set means whose trimming grows with Gini.
-    Gmon
+    Gmon,
+    GmonSpec,
+    "gmon"
 );
 
 impl fmt::Display for Mon {
@@ -341,9 +376,7 @@ impl Estimator for Mon {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::Mon {
-            m: self.part.sets(),
-        }
+        self.spec_of()
     }
 }
 
@@ -361,9 +394,7 @@ impl Estimator for GiniDiagnostic {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::Gini {
-            m: self.part.sets(),
-        }
+        self.spec_of()
     }
 }
 
@@ -391,9 +422,36 @@ impl Estimator for Gmon {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::Gmon {
-            m: self.part.sets(),
-        }
+        self.spec_of()
+    }
+}
+
+/// `gmonb:M=,threshold=` (`M` required, `threshold` 0.25 by default).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GmonBSpec {
+    /// Number of sets.
+    pub m: usize,
+    /// Gini threshold above which MoN replaces the mean.
+    pub threshold: f64,
+}
+
+impl Method for GmonBSpec {
+    const NAME: &'static str = "gmonb";
+    const KEYS: &'static [Key<Self>] = &[
+        Key::required(Key::int("M", |s| &mut s.m)),
+        Key::float("threshold", |s| &mut s.threshold),
+    ];
+    const DEFAULT: Self = GmonBSpec {
+        m: 0,
+        threshold: 0.25,
+    };
+
+    fn build(&self) -> Result<Box<dyn Estimator>> {
+        Ok(Box::new(GmonB::new(self.m, self.threshold)?))
+    }
+
+    fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
+        per_channel(|| GmonB::new(self.m, self.threshold))
     }
 }
 
@@ -480,10 +538,11 @@ impl Estimator for GmonB {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::GmonB {
+        GmonBSpec {
             m: self.part.sets(),
             threshold: self.threshold,
         }
+        .into()
     }
 
     fn reset(&mut self) {

@@ -21,7 +21,7 @@
 //!   the scalar method composes from the luminance buffers (in ascending `j`, like the scalar
 //!   sum), so `luminance(estimate)` equals the scalar estimate on the luminances up to
 //!   rounding. [`RgbEstimator::block_estimate`] averages the rejection counts over the 3×3
-//!   block exactly as [`Zirr::block_estimate`] / [`ZirrRef::block_estimate`] do.
+//!   block exactly as [`Zirr::block_estimate`] does.
 //! * **Pajot** (`pajot-rot`, `pajot-adr`, `pajot-hybrid`): the scalar estimator runs on the
 //!   luminances; a sample is accepted iff its luminance is (black always; otherwise
 //!   `ln L ≤ m`, the final bound, read "as if learning ended now" during learning, like the
@@ -59,10 +59,7 @@
 
 use super::numeric::{ScaledSum, ScaledSums};
 use super::zirr::Splat;
-use super::{
-    Clamp, Estimator, EstimatorSpec, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon, PajotAdr,
-    PajotHybrid, PajotRot, Zirr, ZirrRef, empty,
-};
+use super::{BoundStrategy, Estimator, EstimatorSpec, Pajot, Zirr, empty};
 use crate::error::{Error, Result};
 use std::any::Any;
 use std::fmt;
@@ -120,35 +117,29 @@ pub trait RgbEstimator: Send + Sync + fmt::Display {
     fn as_any(&self) -> &dyn Any;
 }
 
-/// Builds the RGB estimator for a spec (every one of the twelve names), checking every
-/// parameter as [`EstimatorSpec::build`] does.
+/// Builds the RGB estimator for a spec (every method), checking every parameter as
+/// [`EstimatorSpec::build`] does; the same as [`EstimatorSpec::build_rgb`].
 pub fn build_rgb(spec: &EstimatorSpec) -> Result<Box<dyn RgbEstimator>> {
-    fn per<E: Channel>(make: impl Fn() -> Result<E>) -> Result<Box<dyn RgbEstimator>> {
-        Ok(Box::new(PerChannel {
-            ch: [make()?, make()?, make()?],
-        }))
-    }
-    match *spec {
-        EstimatorSpec::Mean => per(|| Ok(Mean::new())),
-        EstimatorSpec::Clamp { c } => per(|| Clamp::new(c)),
-        EstimatorSpec::Mon { m } => per(|| Mon::new(m)),
-        EstimatorSpec::Gini { m } => per(|| GiniDiagnostic::new(m)),
-        EstimatorSpec::GmonB { m, threshold } => per(|| GmonB::new(m, threshold)),
-        EstimatorSpec::Gmon { m } => per(|| Gmon::new(m)),
-        EstimatorSpec::Jung { sigma_image, m_max } => per(|| Jung::new(sigma_image, m_max)),
-        EstimatorSpec::Zirr(p) => Ok(Box::new(ZirrRgb::new(Zirr::new(p)?))),
-        EstimatorSpec::ZirrRef(p) => Ok(Box::new(ZirrRgb::new(ZirrRef::new(p)?))),
-        EstimatorSpec::PajotRot { learn } => {
-            Ok(Box::new(PajotRgb::new(PajotRot::new(learn)?, learn)))
-        }
-        EstimatorSpec::PajotAdr { learn } => {
-            Ok(Box::new(PajotRgb::new(PajotAdr::new(learn)?, learn)))
-        }
-        EstimatorSpec::PajotHybrid { learn, t, delta } => Ok(Box::new(PajotRgb::new(
-            PajotHybrid::new(learn, t, delta)?,
-            learn,
-        ))),
-    }
+    spec.build_rgb()
+}
+
+/// The per-channel RGB estimator: three scalar estimators from `make`.
+pub(super) fn per_channel<E: Estimator + 'static>(
+    make: impl Fn() -> Result<E>,
+) -> Result<Box<dyn RgbEstimator>> {
+    Ok(Box::new(PerChannel {
+        ch: [make()?, make()?, make()?],
+    }))
+}
+
+/// Zirr's RGB estimator around the scalar cascade `lum` on the luminance.
+pub(super) fn zirr_rgb(lum: Zirr) -> Box<dyn RgbEstimator> {
+    Box::new(ZirrRgb::new(lum))
+}
+
+/// Pajot's RGB estimator around the scalar method `lum` on the luminance.
+pub(super) fn pajot_rgb<B: BoundStrategy>(lum: Pajot<B>, learn: usize) -> Box<dyn RgbEstimator> {
+    Box::new(PajotRgb::new(lum, learn))
 }
 
 /// The heap part of a scalar estimator's state (its struct is embedded in ours).
@@ -162,44 +153,6 @@ const CHANNELS: [&str; 3] = ["red", "green", "blue"];
 // ---------------------------------------------------------------------------------------------
 // Per channel
 
-/// A scalar estimator that can run on one channel.
-trait Channel: Estimator + 'static {
-    /// Sets the per-channel `σ_image` of all three channels, checking all before changing any
-    /// (only Jung uses it).
-    fn set_sigmas(channels: &mut [Self; 3], sigma: [f64; 3]) -> Result<()>
-    where
-        Self: Sized,
-    {
-        let _ = (channels, sigma);
-        Ok(())
-    }
-}
-
-impl Channel for Mean {}
-impl Channel for Clamp {}
-impl Channel for Mon {}
-impl Channel for GiniDiagnostic {}
-impl Channel for GmonB {}
-impl Channel for Gmon {}
-
-impl Channel for Jung {
-    fn set_sigmas(channels: &mut [Self; 3], sigma: [f64; 3]) -> Result<()> {
-        for (s, name) in sigma.iter().zip(CHANNELS) {
-            if !(*s >= 0.0 && s.is_finite()) {
-                return Err(Error::param(
-                    "sigma_image",
-                    s,
-                    format!("must be finite and >= 0 (the {name} channel's)"),
-                ));
-            }
-        }
-        for (j, s) in channels.iter_mut().zip(sigma) {
-            j.set_sigma_image(s)?;
-        }
-        Ok(())
-    }
-}
-
 /// Three scalar estimators, one per channel.
 #[derive(Debug, Clone)]
 struct PerChannel<E> {
@@ -209,13 +162,13 @@ struct PerChannel<E> {
 /// Samples per channel deinterleaved at a time (a 512-byte stack buffer).
 const CHUNK: usize = 64;
 
-impl<E: Channel> fmt::Display for PerChannel<E> {
+impl<E: Estimator> fmt::Display for PerChannel<E> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}[RGB]", self.ch[0])
     }
 }
 
-impl<E: Channel> RgbEstimator for PerChannel<E> {
+impl<E: Estimator + 'static> RgbEstimator for PerChannel<E> {
     fn push_slice(&mut self, samples: &[[f64; 3]]) {
         if let [one] = samples {
             for (e, &x) in self.ch.iter_mut().zip(one) {
@@ -250,8 +203,25 @@ impl<E: Channel> RgbEstimator for PerChannel<E> {
         ])
     }
 
+    /// Sets each channel's `σ_image`, checking all three before changing any (only where the
+    /// scalar estimator uses it).
     fn set_image_sigma(&mut self, sigma: [f64; 3]) -> Result<()> {
-        E::set_sigmas(&mut self.ch, sigma)
+        if !self.ch[0].uses_image_sigma() {
+            return Ok(());
+        }
+        for (s, name) in sigma.iter().zip(CHANNELS) {
+            if !(*s >= 0.0 && s.is_finite()) {
+                return Err(Error::param(
+                    "sigma_image",
+                    s,
+                    format!("must be finite and >= 0 (the {name} channel's)"),
+                ));
+            }
+        }
+        for (e, s) in self.ch.iter_mut().zip(sigma) {
+            e.set_image_sigma(s)?;
+        }
+        Ok(())
     }
 
     fn state_bytes(&self) -> usize {
@@ -270,42 +240,11 @@ impl<E: Channel> RgbEstimator for PerChannel<E> {
 // ---------------------------------------------------------------------------------------------
 // Zirr
 
-/// The scalar Zirr variants' colour hooks.
-trait ZirrLike: Estimator + Sized + 'static {
-    fn push_split(&mut self, sample: f64) -> Splat;
-    fn weights(&self) -> Result<Vec<f64>>;
-    fn block_weights(block: &[Option<&Self>; 9]) -> Result<Vec<f64>>;
-}
-
-impl ZirrLike for Zirr {
-    fn push_split(&mut self, sample: f64) -> Splat {
-        Zirr::push_split(self, sample)
-    }
-    fn weights(&self) -> Result<Vec<f64>> {
-        Zirr::weights(self)
-    }
-    fn block_weights(block: &[Option<&Self>; 9]) -> Result<Vec<f64>> {
-        Zirr::block_weights(block)
-    }
-}
-
-impl ZirrLike for ZirrRef {
-    fn push_split(&mut self, sample: f64) -> Splat {
-        ZirrRef::push_split(self, sample)
-    }
-    fn weights(&self) -> Result<Vec<f64>> {
-        ZirrRef::weights(self)
-    }
-    fn block_weights(block: &[Option<&Self>; 9]) -> Result<Vec<f64>> {
-        ZirrRef::block_weights(block)
-    }
-}
-
 /// Zirr's cascade on the luminance, with an RGB buffer beside each luminance buffer.
 #[derive(Debug, Clone)]
-struct ZirrRgb<Z> {
+struct ZirrRgb {
     /// The scalar method on the luminance stream: `N`, luminance buffers, weights.
-    lum: Z,
+    lum: Zirr,
     /// Compensated RGB sums `A_j(RGB)`, channel `c` of buffer `j` at index `3j + c`, grown as
     /// the samples reach higher buffers (a buffer the luminance cascade has but no sample
     /// reached yet is absent here, i.e. zero). Each is rescaled on its own before it would
@@ -313,8 +252,8 @@ struct ZirrRgb<Z> {
     rgb: ScaledSums,
 }
 
-impl<Z: ZirrLike> ZirrRgb<Z> {
-    fn new(lum: Z) -> Self {
+impl ZirrRgb {
+    fn new(lum: Zirr) -> Self {
         ZirrRgb {
             lum,
             rgb: ScaledSums::new(0),
@@ -351,13 +290,13 @@ impl<Z: ZirrLike> ZirrRgb<Z> {
     }
 }
 
-impl<Z: ZirrLike> fmt::Display for ZirrRgb<Z> {
+impl fmt::Display for ZirrRgb {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}[RGB]", self.lum)
     }
 }
 
-impl<Z: ZirrLike> RgbEstimator for ZirrRgb<Z> {
+impl RgbEstimator for ZirrRgb {
     fn push_slice(&mut self, samples: &[[f64; 3]]) {
         for &px in samples {
             let l = luminance(px);
@@ -400,7 +339,7 @@ impl<Z: ZirrLike> RgbEstimator for ZirrRgb<Z> {
     ///
     /// [Z]: super::zirr
     fn block_estimate(&self, block: &[Option<&dyn RgbEstimator>; 9]) -> Result<[f64; 3]> {
-        let mut lum: [Option<&Z>; 9] = [None; 9];
+        let mut lum: [Option<&Zirr>; 9] = [None; 9];
         for (k, (slot, px)) in lum.iter_mut().zip(block).enumerate() {
             if k == 4 {
                 *slot = Some(&self.lum);
@@ -419,7 +358,7 @@ impl<Z: ZirrLike> RgbEstimator for ZirrRgb<Z> {
             };
             *slot = Some(&z.lum);
         }
-        Ok(self.compose(&Z::block_weights(&lum)?))
+        Ok(self.compose(&Zirr::block_weights(&lum)?))
     }
 
     fn state_bytes(&self) -> usize {
@@ -438,35 +377,11 @@ impl<Z: ZirrLike> RgbEstimator for ZirrRgb<Z> {
 // ---------------------------------------------------------------------------------------------
 // Pajot
 
-/// The scalar Pajot estimators' acceptance bound.
-trait PajotLike: Estimator + 'static {
-    /// The acceptance bound `m` (log units), as if learning ended now.
-    fn bound(&self) -> f64;
-}
-
-impl PajotLike for PajotRot {
-    fn bound(&self) -> f64 {
-        PajotRot::bound(self)
-    }
-}
-
-impl PajotLike for PajotAdr {
-    fn bound(&self) -> f64 {
-        PajotAdr::bound(self)
-    }
-}
-
-impl PajotLike for PajotHybrid {
-    fn bound(&self) -> f64 {
-        PajotHybrid::bound(self)
-    }
-}
-
 /// Pajot's method on the luminance; accepted RGB samples are averaged.
 #[derive(Debug, Clone)]
-struct PajotRgb<P> {
+struct PajotRgb<B> {
     /// The scalar method on the luminance stream (decides acceptance).
-    lum: P,
+    lum: Pajot<B>,
     /// The learning-phase length.
     learn: u64,
     /// The bound the list was last released against (after learning).
@@ -480,8 +395,8 @@ struct PajotRgb<P> {
     pending: Vec<(f64, [f64; 3])>,
 }
 
-impl<P: PajotLike> PajotRgb<P> {
-    fn new(lum: P, learn: usize) -> Self {
+impl<B: BoundStrategy> PajotRgb<B> {
+    fn new(lum: Pajot<B>, learn: usize) -> Self {
         PajotRgb {
             lum,
             learn: u64::try_from(learn).unwrap_or(u64::MAX),
@@ -556,13 +471,13 @@ impl<P: PajotLike> PajotRgb<P> {
     }
 }
 
-impl<P: PajotLike> fmt::Display for PajotRgb<P> {
+impl<B: BoundStrategy> fmt::Display for PajotRgb<B> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}[RGB]", self.lum)
     }
 }
 
-impl<P: PajotLike> RgbEstimator for PajotRgb<P> {
+impl<B: BoundStrategy> RgbEstimator for PajotRgb<B> {
     fn push_slice(&mut self, samples: &[[f64; 3]]) {
         for &px in samples {
             self.push_one(px);

@@ -1,14 +1,19 @@
 //! Spec strings `name[:key=value,...]` (docs/estimators.md §1a) and their structured form.
 //!
+//! Each method declares itself once, in its own file, by implementing [`Method`] on its spec
+//! type: its name, its keys (type, default, required or not), whether it is constant-memory and
+//! how it builds its scalar and RGB estimators. The one list of methods, [`methods!`] in
+//! `estimators/mod.rs`, turns those declarations into [`EstimatorSpec`] and everything it does:
+//! parsing, canonical printing, the valid-name list in errors, defaults and construction.
+//!
 //! Parsing is strict: unknown names and keys list the valid ones, a repeated key or a missing
 //! required key is an error, and integer keys take integer literals only. Printing gives the
-//! canonical form (every key in table order, floats in shortest round-trip form), and parsing
-//! the printed form gives the same spec back.
+//! canonical form (every key in declared order, floats in shortest round-trip form), and parsing
+//! the printed form gives the same spec back. Ranges are checked when the estimator is built.
 
-use super::{Clamp, Estimator, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon, Zirr, ZirrRef};
+use super::{Estimator, EstimatorSpec, RgbEstimator};
 use crate::error::{Error, Result};
 use std::fmt;
-use std::str::FromStr;
 
 /// How many buffers Zirr's cascade has.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -17,101 +22,6 @@ pub enum CascadeSize {
     Auto,
     /// The paper's literal fixed cascade of J buffers.
     Fixed(usize),
-}
-
-/// Parameters shared by `zirr` and `zirr-ref` (docs/estimators.md §5, §5a).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ZirrParams {
-    /// Cascade base `b > 1`.
-    pub b: f64,
-    /// Number of buffers.
-    pub j: CascadeSize,
-    /// Robustness `kappa > 0`.
-    pub kappa: f64,
-    /// Lone-firefly count threshold `kappa_min >= 0`.
-    pub kappa_min: f64,
-    /// Luminance unit `u > 0`: buffer j's reference brightness is `u * b^j`.
-    pub u: f64,
-}
-
-impl ZirrParams {
-    /// The paper method's defaults: `b = 8, J = auto, kappa = 1, kappa_min = 1, u = 1`.
-    pub const PAPER: ZirrParams = ZirrParams {
-        b: 8.0,
-        j: CascadeSize::Auto,
-        kappa: 1.0,
-        kappa_min: 1.0,
-        u: 1.0,
-    };
-    /// The released code's defaults: as [`ZirrParams::PAPER`] but `J = 6`.
-    pub const REFERENCE: ZirrParams = ZirrParams {
-        j: CascadeSize::Fixed(6),
-        ..ZirrParams::PAPER
-    };
-}
-
-/// The structured form of a spec string: which estimator, with every parameter explicit.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum EstimatorSpec {
-    /// `mean`
-    Mean,
-    /// `clamp:c=`
-    Clamp {
-        /// Clamping threshold.
-        c: f64,
-    },
-    /// `mon:M=`
-    Mon {
-        /// Number of sets.
-        m: usize,
-    },
-    /// `gini:M=` (the estimate is the Gini coefficient, a diagnostic)
-    Gini {
-        /// Number of sets.
-        m: usize,
-    },
-    /// `gmonb:M=,threshold=`
-    GmonB {
-        /// Number of sets.
-        m: usize,
-        /// Gini threshold above which MoN replaces the mean.
-        threshold: f64,
-    },
-    /// `gmon:M=`
-    Gmon {
-        /// Number of sets.
-        m: usize,
-    },
-    /// `jung:sigma_image=,m_max=`
-    Jung {
-        /// Standard deviation of the image's samples.
-        sigma_image: f64,
-        /// Largest M (odd).
-        m_max: usize,
-    },
-    /// `zirr:b=,J=,kappa=,kappa_min=,u=`
-    Zirr(ZirrParams),
-    /// `zirr-ref:b=,J=,kappa=,kappa_min=,u=`
-    ZirrRef(ZirrParams),
-    /// `pajot-rot:learn=`
-    PajotRot {
-        /// Learning-phase length.
-        learn: usize,
-    },
-    /// `pajot-adr:learn=`
-    PajotAdr {
-        /// Learning-phase length.
-        learn: usize,
-    },
-    /// `pajot-hybrid:learn=,T=,delta=`
-    PajotHybrid {
-        /// Learning-phase length.
-        learn: usize,
-        /// Successive agreeing updates before switching to ROT.
-        t: usize,
-        /// Relative agreement tolerance.
-        delta: f64,
-    },
 }
 
 /// Every constant-memory estimator at the parameters a user would start from: the set the
@@ -128,78 +38,213 @@ pub const CONSTANT_MEMORY_SET: [&str; 9] = [
     "zirr-ref",
 ];
 
-/// Every estimator name with its keys in canonical order.
-const TABLE: &[(&str, &[&str])] = &[
-    ("mean", &[]),
-    ("clamp", &["c"]),
-    ("mon", &["M"]),
-    ("gini", &["M"]),
-    ("gmonb", &["M", "threshold"]),
-    ("gmon", &["M"]),
-    ("jung", &["sigma_image", "m_max"]),
-    ("zirr", &["b", "J", "kappa", "kappa_min", "u"]),
-    ("zirr-ref", &["b", "J", "kappa", "kappa_min", "u"]),
-    ("pajot-rot", &["learn"]),
-    ("pajot-adr", &["learn"]),
-    ("pajot-hybrid", &["learn", "T", "delta"]),
-];
+/// One estimator method as spec strings name it, implemented by the method's spec type (the
+/// payload of its [`EstimatorSpec`] variant) in the method's own file.
+pub trait Method: Copy + PartialEq + fmt::Debug + Into<EstimatorSpec> + 'static {
+    /// The name in spec strings.
+    const NAME: &'static str;
+    /// Every key, in canonical (printing) order.
+    const KEYS: &'static [Key<Self>];
+    /// Every optional key at its default; required keys are overwritten by parsing.
+    const DEFAULT: Self;
+    /// Whether the per-pixel memory is bounded independently of the stream.
+    const CONSTANT_MEMORY: bool = true;
 
-impl EstimatorSpec {
-    /// Every valid estimator name, in the spec table's order.
-    pub fn names() -> impl Iterator<Item = &'static str> {
-        TABLE.iter().map(|(n, _)| *n)
-    }
+    /// Builds the scalar estimator, checking every parameter.
+    fn build(&self) -> Result<Box<dyn Estimator>>;
 
-    /// The estimator's name as written in spec strings.
-    pub fn name(&self) -> &'static str {
-        match self {
-            EstimatorSpec::Mean => "mean",
-            EstimatorSpec::Clamp { .. } => "clamp",
-            EstimatorSpec::Mon { .. } => "mon",
-            EstimatorSpec::Gini { .. } => "gini",
-            EstimatorSpec::GmonB { .. } => "gmonb",
-            EstimatorSpec::Gmon { .. } => "gmon",
-            EstimatorSpec::Jung { .. } => "jung",
-            EstimatorSpec::Zirr(_) => "zirr",
-            EstimatorSpec::ZirrRef(_) => "zirr-ref",
-            EstimatorSpec::PajotRot { .. } => "pajot-rot",
-            EstimatorSpec::PajotAdr { .. } => "pajot-adr",
-            EstimatorSpec::PajotHybrid { .. } => "pajot-hybrid",
+    /// Builds the RGB estimator (docs in `rgb.rs`), checking every parameter as `build` does.
+    fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>>;
+}
+
+/// One key of a method: its name, whether it must be given, and the spec field it reads and
+/// writes (whose type is the key's type).
+pub struct Key<S> {
+    name: &'static str,
+    required: bool,
+    field: Field<S>,
+}
+
+/// A key's field and type.
+enum Field<S> {
+    /// A float (any `f64` literal).
+    Float(fn(&mut S) -> &mut f64),
+    /// A non-negative integer literal.
+    Int(fn(&mut S) -> &mut usize),
+    /// A cascade size: an integer literal, or `auto` when `auto` is set.
+    Cascade {
+        auto: bool,
+        at: fn(&mut S) -> &mut CascadeSize,
+    },
+}
+
+impl<S> Key<S> {
+    /// A float key, defaulting to the field's value in [`Method::DEFAULT`].
+    pub const fn float(name: &'static str, at: fn(&mut S) -> &mut f64) -> Self {
+        Key {
+            name,
+            required: false,
+            field: Field::Float(at),
         }
     }
 
-    /// Whether the method's per-pixel memory is bounded independently of the stream
-    /// (everything but Pajot's learning set and dubious list).
-    pub fn is_constant_memory(&self) -> bool {
-        !matches!(
-            self,
-            EstimatorSpec::PajotRot { .. }
-                | EstimatorSpec::PajotAdr { .. }
-                | EstimatorSpec::PajotHybrid { .. }
-        )
+    /// An integer-literal key, defaulting to the field's value in [`Method::DEFAULT`].
+    pub const fn int(name: &'static str, at: fn(&mut S) -> &mut usize) -> Self {
+        Key {
+            name,
+            required: false,
+            field: Field::Int(at),
+        }
     }
 
-    /// Builds the estimator, checking every parameter.
-    pub fn build(&self) -> Result<Box<dyn Estimator>> {
-        Ok(match *self {
-            EstimatorSpec::Mean => Box::new(Mean::new()),
-            EstimatorSpec::Clamp { c } => Box::new(Clamp::new(c)?),
-            EstimatorSpec::Mon { m } => Box::new(Mon::new(m)?),
-            EstimatorSpec::Gini { m } => Box::new(GiniDiagnostic::new(m)?),
-            EstimatorSpec::GmonB { m, threshold } => Box::new(GmonB::new(m, threshold)?),
-            EstimatorSpec::Gmon { m } => Box::new(Gmon::new(m)?),
-            EstimatorSpec::Jung { sigma_image, m_max } => Box::new(Jung::new(sigma_image, m_max)?),
-            EstimatorSpec::Zirr(p) => Box::new(Zirr::new(p)?),
-            EstimatorSpec::ZirrRef(p) => Box::new(ZirrRef::new(p)?),
-            // PAJOT-ARMS: wired by the Pajot module.
-            EstimatorSpec::PajotRot { learn } => Box::new(super::PajotRot::new(learn)?),
-            EstimatorSpec::PajotAdr { learn } => Box::new(super::PajotAdr::new(learn)?),
-            EstimatorSpec::PajotHybrid { learn, t, delta } => {
-                Box::new(super::PajotHybrid::new(learn, t, delta)?)
+    /// A cascade-size key (`auto` accepted only when `auto` is true).
+    pub const fn cascade(
+        name: &'static str,
+        auto: bool,
+        at: fn(&mut S) -> &mut CascadeSize,
+    ) -> Self {
+        Key {
+            name,
+            required: false,
+            field: Field::Cascade { auto, at },
+        }
+    }
+
+    /// `key` with no default: a spec must give it.
+    pub const fn required(self) -> Self {
+        Key {
+            required: true,
+            ..self
+        }
+    }
+
+    /// The key's name as written in spec strings.
+    pub fn name(&self) -> &'static str {
+        self.name
+    }
+
+    /// Writes the key's value in `spec` in canonical form.
+    fn write(&self, spec: &S, f: &mut fmt::Formatter<'_>) -> fmt::Result
+    where
+        S: Copy,
+    {
+        let mut s = *spec;
+        match self.field {
+            Field::Float(at) => write!(f, "{}", fmt_f64(*at(&mut s))),
+            Field::Int(at) => write!(f, "{}", at(&mut s)),
+            Field::Cascade { at, .. } => match *at(&mut s) {
+                CascadeSize::Auto => write!(f, "auto"),
+                CascadeSize::Fixed(j) => write!(f, "{j}"),
+            },
+        }
+    }
+
+    /// Parses `v` into the key's field of `spec`.
+    fn read(&self, spec: &mut S, v: &str, text: &str) -> Result<()> {
+        let key = self.name;
+        let bad = |what: &str| malformed(text, format!("{key} = '{v}' is not {what}"));
+        match self.field {
+            Field::Float(at) => *at(spec) = v.parse().map_err(|_| bad("a number"))?,
+            Field::Int(at) => *at(spec) = parse_int(v).ok_or_else(|| bad("an integer literal"))?,
+            Field::Cascade { auto: true, at } if v == "auto" => *at(spec) = CascadeSize::Auto,
+            Field::Cascade { auto, at } => {
+                let what = if auto {
+                    "an integer literal or 'auto'"
+                } else {
+                    "an integer literal"
+                };
+                *at(spec) = CascadeSize::Fixed(parse_int(v).ok_or_else(|| bad(what))?);
             }
-        })
+        }
+        Ok(())
     }
 }
+
+/// The one list of methods: one line `Variant(module::SpecType),` per method, in the order the
+/// valid-name list shows them. Generates [`EstimatorSpec`], with a variant per method holding
+/// its spec type, and its dispatch to each method's [`Method`] declaration.
+macro_rules! methods {
+    ($($variant:ident($module:ident::$spec:ident),)*) => {
+        $(pub use $module::$spec;)*
+
+        /// The structured form of a spec string: which estimator, with every parameter explicit.
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        pub enum EstimatorSpec {
+            $(
+                #[doc = concat!("See [`", stringify!($spec), "`].")]
+                $variant($spec),
+            )*
+        }
+
+        $(
+            impl From<$spec> for EstimatorSpec {
+                fn from(s: $spec) -> Self {
+                    EstimatorSpec::$variant(s)
+                }
+            }
+        )*
+
+        impl EstimatorSpec {
+            /// Every valid estimator name, in the list's order.
+            pub fn names() -> impl Iterator<Item = &'static str> {
+                [$(<$spec as spec::Method>::NAME),*].into_iter()
+            }
+
+            /// The estimator's name as written in spec strings.
+            pub fn name(&self) -> &'static str {
+                match self {
+                    $(EstimatorSpec::$variant(_) => <$spec as spec::Method>::NAME,)*
+                }
+            }
+
+            /// Whether the method's per-pixel memory is bounded independently of the stream
+            /// (everything but Pajot's learning set and dubious list).
+            pub fn is_constant_memory(&self) -> bool {
+                match self {
+                    $(EstimatorSpec::$variant(_) => <$spec as spec::Method>::CONSTANT_MEMORY,)*
+                }
+            }
+
+            /// Builds the estimator, checking every parameter.
+            pub fn build(&self) -> Result<Box<dyn Estimator>> {
+                match self {
+                    $(EstimatorSpec::$variant(s) => spec::Method::build(s),)*
+                }
+            }
+
+            /// Builds the RGB estimator, checking every parameter as
+            /// [`EstimatorSpec::build`] does.
+            pub fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
+                match self {
+                    $(EstimatorSpec::$variant(s) => spec::Method::build_rgb(s),)*
+                }
+            }
+        }
+
+        impl std::fmt::Display for EstimatorSpec {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                match self {
+                    $(EstimatorSpec::$variant(s) => spec::write_spec(s, f),)*
+                }
+            }
+        }
+
+        impl std::str::FromStr for EstimatorSpec {
+            type Err = crate::error::Error;
+
+            fn from_str(text: &str) -> Result<Self> {
+                let (name, rest) = spec::split_name(text);
+                $(
+                    if name == <$spec as spec::Method>::NAME {
+                        return spec::parse_spec::<$spec>(text, rest).map(EstimatorSpec::$variant);
+                    }
+                )*
+                Err(spec::unknown_name(name, Self::names()))
+            }
+        }
+    };
+}
+pub(super) use methods;
 
 /// Shortest round-trip text of a float; exponent form when the plain form would be long
 /// (`1e300`, not three hundred digits).
@@ -212,88 +257,83 @@ pub(super) fn fmt_f64(x: f64) -> String {
     }
 }
 
-impl fmt::Display for EstimatorSpec {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let zirr = |f: &mut fmt::Formatter<'_>, name: &str, p: &ZirrParams| {
-            let j = match p.j {
-                CascadeSize::Auto => "auto".to_string(),
-                CascadeSize::Fixed(j) => j.to_string(),
-            };
-            write!(
-                f,
-                "{name}:b={},J={j},kappa={},kappa_min={},u={}",
-                fmt_f64(p.b),
-                fmt_f64(p.kappa),
-                fmt_f64(p.kappa_min),
-                fmt_f64(p.u)
-            )
+/// `name:key=value,...` with every key in declared order.
+pub(super) fn write_spec<M: Method>(spec: &M, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+    write!(f, "{}", M::NAME)?;
+    for (i, key) in M::KEYS.iter().enumerate() {
+        write!(f, "{}{}=", if i == 0 { ':' } else { ',' }, key.name)?;
+        key.write(spec, f)?;
+    }
+    Ok(())
+}
+
+/// The name (trimmed) and the text after its `:`, if any.
+pub(super) fn split_name(text: &str) -> (&str, Option<&str>) {
+    match text.split_once(':') {
+        Some((n, r)) => (n.trim(), Some(r)),
+        None => (text.trim(), None),
+    }
+}
+
+/// The error for a name no method has, listing the valid ones.
+pub(super) fn unknown_name<'a>(name: &str, valid: impl Iterator<Item = &'a str>) -> Error {
+    Error::UnknownEstimator {
+        name: name.to_string(),
+        valid: valid.collect::<Vec<_>>().join(", "),
+    }
+}
+
+fn malformed(text: &str, reason: impl Into<String>) -> Error {
+    Error::MalformedSpec {
+        spec: text.to_string(),
+        reason: reason.into(),
+    }
+}
+
+/// Parses the `key=value` list `rest` of method `M`'s spec `text`: known keys only, each at
+/// most once, every required key present; the others keep [`Method::DEFAULT`]'s values.
+pub(super) fn parse_spec<M: Method>(text: &str, rest: Option<&str>) -> Result<M> {
+    let mut pairs: Vec<(&Key<M>, &str)> = Vec::new();
+    for item in rest.into_iter().flat_map(|r| r.split(',')) {
+        let Some((k, v)) = item.split_once('=') else {
+            return Err(malformed(text, format!("'{item}' is not key=value")));
         };
-        match self {
-            EstimatorSpec::Mean => write!(f, "mean"),
-            EstimatorSpec::Clamp { c } => write!(f, "clamp:c={}", fmt_f64(*c)),
-            EstimatorSpec::Mon { m } => write!(f, "mon:M={m}"),
-            EstimatorSpec::Gini { m } => write!(f, "gini:M={m}"),
-            EstimatorSpec::GmonB { m, threshold } => {
-                write!(f, "gmonb:M={m},threshold={}", fmt_f64(*threshold))
+        let (k, v) = (k.trim(), v.trim());
+        let Some(key) = M::KEYS.iter().find(|key| key.name == k) else {
+            let valid = if M::KEYS.is_empty() {
+                "(none)".to_string()
+            } else {
+                M::KEYS
+                    .iter()
+                    .map(|k| k.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            return Err(Error::UnknownKey {
+                estimator: M::NAME.to_string(),
+                key: k.to_string(),
+                valid,
+            });
+        };
+        if pairs.iter().any(|(seen, _)| seen.name == k) {
+            return Err(malformed(text, format!("key '{k}' given twice")));
+        }
+        pairs.push((key, v));
+    }
+    let mut spec = M::DEFAULT;
+    for key in M::KEYS {
+        match pairs.iter().find(|(k, _)| k.name == key.name) {
+            Some((_, v)) => key.read(&mut spec, v, text)?,
+            None if key.required => {
+                return Err(malformed(
+                    text,
+                    format!("missing required key '{}'", key.name),
+                ));
             }
-            EstimatorSpec::Gmon { m } => write!(f, "gmon:M={m}"),
-            EstimatorSpec::Jung { sigma_image, m_max } => {
-                write!(
-                    f,
-                    "jung:sigma_image={},m_max={m_max}",
-                    fmt_f64(*sigma_image)
-                )
-            }
-            EstimatorSpec::Zirr(p) => zirr(f, "zirr", p),
-            EstimatorSpec::ZirrRef(p) => zirr(f, "zirr-ref", p),
-            EstimatorSpec::PajotRot { learn } => write!(f, "pajot-rot:learn={learn}"),
-            EstimatorSpec::PajotAdr { learn } => write!(f, "pajot-adr:learn={learn}"),
-            EstimatorSpec::PajotHybrid { learn, t, delta } => {
-                write!(
-                    f,
-                    "pajot-hybrid:learn={learn},T={t},delta={}",
-                    fmt_f64(*delta)
-                )
-            }
+            None => {}
         }
     }
-}
-
-/// The key/value pairs of one spec string, consumed as they are read.
-struct Keys<'a> {
-    spec: &'a str,
-    pairs: Vec<(&'a str, &'a str)>,
-}
-
-impl<'a> Keys<'a> {
-    fn malformed(&self, reason: impl Into<String>) -> Error {
-        Error::MalformedSpec {
-            spec: self.spec.to_string(),
-            reason: reason.into(),
-        }
-    }
-
-    fn take(&mut self, key: &str) -> Option<&'a str> {
-        let i = self.pairs.iter().position(|(k, _)| *k == key)?;
-        Some(self.pairs.remove(i).1)
-    }
-
-    fn float(&mut self, key: &str, default: Option<f64>) -> Result<f64> {
-        match self.take(key) {
-            None => default.ok_or_else(|| self.malformed(format!("missing required key '{key}'"))),
-            Some(v) => v
-                .parse::<f64>()
-                .map_err(|_| self.malformed(format!("{key} = '{v}' is not a number"))),
-        }
-    }
-
-    fn int(&mut self, key: &str, default: Option<usize>) -> Result<usize> {
-        match self.take(key) {
-            None => default.ok_or_else(|| self.malformed(format!("missing required key '{key}'"))),
-            Some(v) => parse_int(v)
-                .ok_or_else(|| self.malformed(format!("{key} = '{v}' is not an integer literal"))),
-        }
-    }
+    Ok(spec)
 }
 
 /// A non-negative decimal integer literal (`5`, not `5.0` or `+5`).
@@ -302,108 +342,6 @@ fn parse_int(v: &str) -> Option<usize> {
         return None;
     }
     v.parse().ok()
-}
-
-impl FromStr for EstimatorSpec {
-    type Err = Error;
-
-    fn from_str(spec: &str) -> Result<Self> {
-        let (name, rest) = match spec.split_once(':') {
-            Some((n, r)) => (n.trim(), Some(r)),
-            None => (spec.trim(), None),
-        };
-        let Some((_, valid_keys)) = TABLE.iter().find(|(n, _)| *n == name) else {
-            return Err(Error::UnknownEstimator {
-                name: name.to_string(),
-                valid: EstimatorSpec::names().collect::<Vec<_>>().join(", "),
-            });
-        };
-        let mut keys = Keys {
-            spec,
-            pairs: Vec::new(),
-        };
-        for item in rest.into_iter().flat_map(|r| r.split(',')) {
-            let Some((k, v)) = item.split_once('=') else {
-                return Err(keys.malformed(format!("'{item}' is not key=value")));
-            };
-            let (k, v) = (k.trim(), v.trim());
-            if !valid_keys.contains(&k) {
-                let valid = if valid_keys.is_empty() {
-                    "(none)".to_string()
-                } else {
-                    valid_keys.join(", ")
-                };
-                return Err(Error::UnknownKey {
-                    estimator: name.to_string(),
-                    key: k.to_string(),
-                    valid,
-                });
-            }
-            if keys.pairs.iter().any(|(seen, _)| *seen == k) {
-                return Err(keys.malformed(format!("key '{k}' given twice")));
-            }
-            keys.pairs.push((k, v));
-        }
-        let zirr = |keys: &mut Keys, defaults: ZirrParams, auto_ok: bool| -> Result<ZirrParams> {
-            let j = match keys.take("J") {
-                None => defaults.j,
-                Some("auto") if auto_ok => CascadeSize::Auto,
-                Some(v) => CascadeSize::Fixed(parse_int(v).ok_or_else(|| {
-                    let expected = if auto_ok {
-                        "an integer literal or 'auto'"
-                    } else {
-                        "an integer literal"
-                    };
-                    keys.malformed(format!("J = '{v}' is not {expected}"))
-                })?),
-            };
-            Ok(ZirrParams {
-                b: keys.float("b", Some(defaults.b))?,
-                j,
-                kappa: keys.float("kappa", Some(defaults.kappa))?,
-                kappa_min: keys.float("kappa_min", Some(defaults.kappa_min))?,
-                u: keys.float("u", Some(defaults.u))?,
-            })
-        };
-        let k = &mut keys;
-        Ok(match name {
-            "mean" => EstimatorSpec::Mean,
-            "clamp" => EstimatorSpec::Clamp {
-                c: k.float("c", None)?,
-            },
-            "mon" => EstimatorSpec::Mon {
-                m: k.int("M", None)?,
-            },
-            "gini" => EstimatorSpec::Gini {
-                m: k.int("M", None)?,
-            },
-            "gmonb" => EstimatorSpec::GmonB {
-                m: k.int("M", None)?,
-                threshold: k.float("threshold", Some(0.25))?,
-            },
-            "gmon" => EstimatorSpec::Gmon {
-                m: k.int("M", None)?,
-            },
-            "jung" => EstimatorSpec::Jung {
-                sigma_image: k.float("sigma_image", None)?,
-                m_max: k.int("m_max", Some(17))?,
-            },
-            "zirr" => EstimatorSpec::Zirr(zirr(k, ZirrParams::PAPER, true)?),
-            "zirr-ref" => EstimatorSpec::ZirrRef(zirr(k, ZirrParams::REFERENCE, false)?),
-            "pajot-rot" => EstimatorSpec::PajotRot {
-                learn: k.int("learn", Some(50))?,
-            },
-            "pajot-adr" => EstimatorSpec::PajotAdr {
-                learn: k.int("learn", Some(50))?,
-            },
-            "pajot-hybrid" => EstimatorSpec::PajotHybrid {
-                learn: k.int("learn", Some(50))?,
-                t: k.int("T", Some(2))?,
-                delta: k.float("delta", Some(0.0))?,
-            },
-            _ => unreachable!("name checked against TABLE above"),
-        })
-    }
 }
 
 #[cfg(test)]

@@ -19,7 +19,7 @@
 //! Two variants:
 //!
 //! * [`Zirr`] — the paper's method, `zirr` (docs/estimators.md §5).
-//! * [`ZirrRef`] — the authors' released code (public repository `tszirr/ic.js`, folder `rw/`),
+//! * [`Zirr`] — the authors' released code (public repository `tszirr/ic.js`, folder `rw/`),
 //!   `zirr-ref` (docs/estimators.md §5a): the top buffer clamps the energy it receives at its reference
 //!   brightness (the excess is reported as the extra `discarded`), the weight averages a count
 //!   term and a colour term, and the neighbourhood is always divided by 9 with clamp-to-edge.
@@ -87,7 +87,7 @@
 //!
 //! # Neighbourhood (3×3)
 //!
-//! [`Zirr::block_estimate`] and [`ZirrRef::block_estimate`] take the nine pixels of a 3×3 block
+//! [`Zirr::block_estimate`] and [`Zirr::block_estimate`] take the nine pixels of a 3×3 block
 //! in row-major order (index 4 is the centre; `None` is a pixel outside the image). The centre
 //! must be present and have samples, and every present pixel must have the centre's parameters
 //! (otherwise an error names the offending index). Only the rejection count `ρ_j` uses the
@@ -107,20 +107,102 @@
 //! # Colour
 //!
 //! A colour film runs the cascade on each sample's luminance and splats the sample's RGB with
-//! the same fractions: [`Zirr::push_split`] / [`ZirrRef::push_split`] push one luminance like
+//! the same fractions: [`Zirr::push_split`] / [`Zirr::push_split`] push one luminance like
 //! [`Estimator::push`] and return where it went ([`Splat`]); [`Zirr::weights`] and
-//! [`Zirr::block_weights`] (and the same on [`ZirrRef`]) return the `w_j` the estimate applies
+//! [`Zirr::block_weights`] (and the same on [`Zirr`]) return the `w_j` the estimate applies
 //! to the buffers, so the film's estimate is `Σ_j w_j·B_j(RGB)`. They change nothing in the
 //! scalar method: a `push_split` makes the same additions as `push`, and the weights are those
 //! the estimate composes with.
 
 use super::numeric::{ScaledSum, ScaledSums};
+use super::rgb::zirr_rgb;
 use super::spec::fmt_f64;
-use super::{CascadeSize, Estimator, EstimatorSpec, Extra, Extras, Neumaier, ZirrParams};
+use super::{
+    CascadeSize, Estimator, EstimatorSpec, Extra, Extras, Key, Method, Neumaier, RgbEstimator,
+};
 use crate::error::Num;
 use crate::error::{Error, Result};
 use arrayvec::ArrayVec;
 use std::fmt;
+
+/// Parameters shared by `zirr` and `zirr-ref` (docs/estimators.md §5, §5a).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ZirrParams {
+    /// Cascade base `b > 1`.
+    pub b: f64,
+    /// Number of buffers.
+    pub j: CascadeSize,
+    /// Robustness `kappa > 0`.
+    pub kappa: f64,
+    /// Lone-firefly count threshold `kappa_min >= 0`.
+    pub kappa_min: f64,
+    /// Luminance unit `u > 0`: buffer j's reference brightness is `u * b^j`.
+    pub u: f64,
+}
+
+impl ZirrParams {
+    /// The paper method's defaults: `b = 8, J = auto, kappa = 1, kappa_min = 1, u = 1`.
+    pub const PAPER: ZirrParams = ZirrParams {
+        b: 8.0,
+        j: CascadeSize::Auto,
+        kappa: 1.0,
+        kappa_min: 1.0,
+        u: 1.0,
+    };
+    /// The released code's defaults: as [`ZirrParams::PAPER`] but `J = 6`.
+    pub const REFERENCE: ZirrParams = ZirrParams {
+        j: CascadeSize::Fixed(6),
+        ..ZirrParams::PAPER
+    };
+}
+
+/// A Zirr variant's spec type and its [`Method`] declaration: the keys `b, J, kappa,
+/// kappa_min, u` (all optional), with the variant's defaults and whether `J = auto` parses.
+macro_rules! zirr_spec {
+    ($(#[$doc:meta])* $spec:ident, $name:literal, $defaults:expr, auto: $auto:literal, $build:expr) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        pub struct $spec(pub ZirrParams);
+
+        impl Method for $spec {
+            const NAME: &'static str = $name;
+            const KEYS: &'static [Key<Self>] = &[
+                Key::float("b", |s| &mut s.0.b),
+                Key::cascade("J", $auto, |s| &mut s.0.j),
+                Key::float("kappa", |s| &mut s.0.kappa),
+                Key::float("kappa_min", |s| &mut s.0.kappa_min),
+                Key::float("u", |s| &mut s.0.u),
+            ];
+            const DEFAULT: Self = $spec($defaults);
+
+            fn build(&self) -> Result<Box<dyn Estimator>> {
+                Ok(Box::new($build(self.0)?))
+            }
+
+            fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
+                Ok(zirr_rgb($build(self.0)?))
+            }
+        }
+    };
+}
+
+zirr_spec!(
+    /// `zirr:b=,J=,kappa=,kappa_min=,u=`, defaults [`ZirrParams::PAPER`] (`J = auto` allowed).
+    ZirrSpec,
+    "zirr",
+    ZirrParams::PAPER,
+    auto: true,
+    Zirr::new
+);
+zirr_spec!(
+    /// `zirr-ref:b=,J=,kappa=,kappa_min=,u=`, defaults [`ZirrParams::REFERENCE`] (`J` an
+    /// integer).
+    ZirrRefSpec,
+    "zirr-ref",
+    ZirrParams::REFERENCE,
+    auto: false,
+    Zirr::reference
+);
 
 /// The largest cascade (number of buffers) a parameter set may need; larger ones are rejected.
 pub const MAX_BUFFERS: usize = 4096;
@@ -147,16 +229,17 @@ const AT_MOST_TOLERANCE: f64 = 1e-9;
 /// Floor of the running brightness in the released code's colour term, in units of `u`.
 const REF_BRIGHTNESS_FLOOR: f64 = 0.05;
 
-/// Which of the two weightings composes the buffers.
+/// Which of the two variants a [`Zirr`] estimator is: the weighting that composes the buffers,
+/// what the top buffer keeps, and how a 3×3 block averages the rejection counts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Flavor {
+pub enum Flavor {
     /// \[Z\] eqs. 12–13 with the at-most rejection test (docs/estimators.md §5).
     Paper,
     /// The released shader's averaged count and colour terms (docs/estimators.md §5a).
     Reference,
 }
 
-/// Where one sample pushed through [`Zirr::push_split`] or [`ZirrRef::push_split`] went: the
+/// Where one sample pushed through [`Zirr::push_split`] or [`Zirr::push_split`] went: the
 /// hook that lets a colour film splat an RGB sample with the fractions of its luminance.
 ///
 /// For a sample `S` (the luminance) and any other quantity `X` carried with it (one colour
@@ -733,11 +816,12 @@ impl Cascade {
     }
 }
 
-/// Checks a 3×3 block (centre present with samples, equal parameters) and returns the centre.
-fn check_block<'a, T: fmt::Display>(
-    block: &[Option<&'a T>; 9],
-    cascade: impl Fn(&T) -> &Cascade,
-) -> Result<&'a T> {
+/// Checks a 3×3 block (centre present with samples, equal flavours and parameters) and returns
+/// the centre.
+fn check_block<'a>(block: &[Option<&'a Zirr>; 9]) -> Result<&'a Zirr> {
+    fn cascade(z: &Zirr) -> &Cascade {
+        &z.c
+    }
     let Some(centre) = block[4] else {
         return Err(Error::param(
             "block index",
@@ -752,6 +836,16 @@ fn check_block<'a, T: fmt::Display>(
     }
     for (i, px) in block.iter().enumerate() {
         let Some(px) = px else { continue };
+        if px.flavor() != centre.flavor() {
+            return Err(Error::param(
+                "block index",
+                i,
+                format!(
+                    "pixel {i} is {px} but the centre is {centre}; all pixels of a block \
+                     must be the same variant (zirr or zirr-ref)"
+                ),
+            ));
+        }
         if cascade(px).params != cascade(centre).params {
             return Err(Error::param(
                 "block index",
@@ -766,22 +860,49 @@ fn check_block<'a, T: fmt::Display>(
     Ok(centre)
 }
 
-/// Zirr et al.'s cascade reweighting as in the paper (docs/estimators.md §5, spec string `zirr`).
+/// Zirr et al.'s cascade reweighting, in either variant ([`Flavor`]): as in the paper
+/// (docs/estimators.md §5, spec string `zirr`, [`Zirr::new`]) or as in the authors' released
+/// code (docs/estimators.md §5a, spec string `zirr-ref`, [`Zirr::reference`]).
 ///
-/// Extras, in order: `J_used`, `over_range`, `B`, `n`, `rho`, `w` (see the module docs).
+/// Extras, in order: `J_used`, `over_range`, `B`, `n`, `rho`, `w` (see the module docs); the
+/// released-code variant adds `discarded`: the energy above `c_{J−1}` dropped at the top buffer,
+/// `Σ (S − c_{J−1}) / N` over the samples with `S/u ≥ p_{J−1}` — a per-sample mean like `B`, so
+/// `Σ B_j + discarded` is the plain mean.
 #[derive(Debug, Clone)]
 pub struct Zirr {
     c: Cascade,
+    /// The released code's discarded energy, rescaled before it overflows like the buffers;
+    /// `None` in the paper's variant (its presence is the flavour, so the paper's per-pixel
+    /// state grows by one sum's size only).
+    discarded: Option<ScaledSum>,
 }
 
 impl Zirr {
-    /// Checked constructor: `b > 1`, `kappa > 0`, `kappa_min ≥ 0`, `u > 0`, all finite;
-    /// `J = auto` or a fixed `J` in `1..=4096`; with `J = auto` the cascade limit
-    /// `log_b(f64::MAX/u) + 2` must be at most [`MAX_BUFFERS`]. Never panics.
+    /// The paper's variant. Checked constructor: `b > 1`, `kappa > 0`, `kappa_min ≥ 0`,
+    /// `u > 0`, all finite; `J = auto` or a fixed `J` in `1..=4096`; with `J = auto` the
+    /// cascade limit `log_b(f64::MAX/u) + 2` must be at most [`MAX_BUFFERS`]. Never panics.
     pub fn new(p: ZirrParams) -> Result<Self> {
+        Self::with_flavor(Flavor::Paper, p)
+    }
+
+    /// The released code's variant. Checked constructor: as [`Zirr::new`], and moreover `J`
+    /// fixed and at least 2, `kappa_min = 1`, and `u·b^(J−1)` finite. Never panics.
+    pub fn reference(p: ZirrParams) -> Result<Self> {
+        Self::with_flavor(Flavor::Reference, p)
+    }
+
+    /// Either variant, checking its parameters as [`Zirr::new`] or [`Zirr::reference`] do.
+    pub fn with_flavor(flavor: Flavor, p: ZirrParams) -> Result<Self> {
+        if flavor == Flavor::Reference {
+            check_reference(&p)?;
+        }
         let limit = check_common(&p)?;
+        if flavor == Flavor::Reference {
+            check_reference_top(&p)?;
+        }
         Ok(Zirr {
             c: Cascade::new(p, limit),
+            discarded: (flavor == Flavor::Reference).then(ScaledSum::new),
         })
     }
 
@@ -790,21 +911,39 @@ impl Zirr {
         self.c.params
     }
 
+    /// The variant.
+    pub fn flavor(&self) -> Flavor {
+        match self.discarded {
+            None => Flavor::Paper,
+            Some(_) => Flavor::Reference,
+        }
+    }
+
     /// The estimate of the centre pixel of a 3×3 block (row-major, index 4 the centre, `None`
-    /// outside the image), with the rejection counts `ρ_j` averaged over the present pixels
-    /// that have samples (\[Z\] §5.3.1; see the module docs), and the centre's extras with that
-    /// `rho`. Errors when the centre is missing or empty, or when a pixel's parameters differ
-    /// from the centre's (naming its index).
+    /// outside the image), with the rejection counts `ρ_j` averaged over the block (\[Z\]
+    /// §5.3.1; see the module docs), and the centre's extras with that `rho`. The paper's
+    /// variant averages over the present pixels that have samples; the released code's, as its
+    /// shader, sums nine counts over 9, with clamp-to-edge substitution for missing pixels and 0
+    /// for present pixels without samples (docs/estimators.md §5a). Errors when the centre is
+    /// missing or empty, or when a pixel's variant or parameters differ from the centre's
+    /// (naming its index).
     pub fn block_estimate(block: &[Option<&Self>; 9]) -> Result<(f64, Extras)> {
         let (centre, rho) = Self::block_rho(block)?;
-        Ok(centre.c.report(Flavor::Paper, Some(&rho)))
+        let (estimate, mut extras) = centre.c.report(centre.flavor(), Some(&rho));
+        centre.push_discarded(&mut extras);
+        Ok((estimate, extras))
     }
 
     /// Pushes one sample (the same as [`Estimator::push`]) and tells which buffers received
     /// which fractions of it: the hook for a colour film that splats each RGB sample with the
-    /// fractions of its luminance (see [`Splat`]).
+    /// fractions of its luminance (see [`Splat`]). In the released code's variant a sample at
+    /// or over the top buffer's reference brightness comes back as [`Splat::Clamped`].
     pub fn push_split(&mut self, sample: f64) -> Splat {
-        self.c.push_one(sample, false)
+        let splat = self.c.push_one(sample, self.discarded.is_some());
+        if let (Splat::Clamped { v, .. }, Some(d)) = (splat, &mut self.discarded) {
+            d.add(sample - v);
+        }
+        splat
     }
 
     /// The weights `w_j` of the estimate, one per buffer of the cascade (`J_used` of them): the
@@ -813,38 +952,135 @@ impl Zirr {
         if self.c.n == 0 {
             return Err(super::empty(self));
         }
-        Ok(self.c.weights(Flavor::Paper, None))
+        Ok(self.c.weights(self.flavor(), None))
     }
 
     /// The weights `w_j` of [`Zirr::block_estimate`]'s estimate for the centre of the block,
     /// one per buffer of the centre's cascade. Errors as [`Zirr::block_estimate`].
     pub fn block_weights(block: &[Option<&Self>; 9]) -> Result<Vec<f64>> {
         let (centre, rho) = Self::block_rho(block)?;
-        Ok(centre.c.weights(Flavor::Paper, Some(&rho)))
+        Ok(centre.c.weights(centre.flavor(), Some(&rho)))
     }
 
-    /// The checked centre of a block and its rejection counts `ρ_j` (\[Z\] §5.3.1).
+    /// The checked centre of a block and its rejection counts `ρ_j`.
     fn block_rho<'a>(block: &[Option<&'a Self>; 9]) -> Result<(&'a Self, Vec<f64>)> {
-        let centre = check_block(block, |z: &Zirr| &z.c)?;
+        let centre = check_block(block)?;
         let len = centre.c.a.len();
-        let mut sum = vec![0.0f64; len];
-        let mut pixels = 0usize;
-        for px in block.iter().flatten() {
-            if px.c.n == 0 {
-                continue;
-            }
-            pixels += 1;
-            px.c.for_each_row(len, |j, _, n, _| sum[j] += n);
-        }
-        let rho: Vec<f64> = sum.iter().map(|s| s / pixels as f64).collect();
+        let rho = match centre.flavor() {
+            Flavor::Paper => paper_rho(block, len),
+            Flavor::Reference => reference_rho(block, len),
+        };
         Ok((centre, rho))
     }
+
+    /// Appends `discarded` to the extras in the released code's variant.
+    fn push_discarded(&self, extras: &mut Extras) {
+        if let Some(d) = &self.discarded {
+            let mean = if self.c.n == 0 { 0.0 } else { d.mean(self.c.n) };
+            extras.push(("discarded", Extra::Float(mean)));
+        }
+    }
+}
+
+/// zirr-ref's own rules on J, checked before the common ones so its messages never suggest
+/// `auto`.
+fn check_reference(p: &ZirrParams) -> Result<()> {
+    let CascadeSize::Fixed(j) = p.j else {
+        return Err(Error::param(
+            "J",
+            "auto",
+            "zirr-ref needs a fixed integer J (the released code's cascade is fixed)",
+        ));
+    };
+    if j < 2 {
+        return Err(Error::param(
+            "J",
+            j,
+            format!("zirr-ref needs an integer J in 2..={MAX_BUFFERS}"),
+        ));
+    }
+    Ok(())
+}
+
+/// zirr-ref's rules after the common ones: `kappa_min = 1` and a finite top reference
+/// brightness `u·b^(J−1)`.
+fn check_reference_top(p: &ZirrParams) -> Result<()> {
+    if p.kappa_min != 1.0 {
+        return Err(Error::param(
+            "kappa_min",
+            fmt_f64(p.kappa_min),
+            "must be 1 for zirr-ref (the released code has no separate threshold)",
+        ));
+    }
+    let CascadeSize::Fixed(j) = p.j else {
+        return Ok(());
+    };
+    let mut top = 1.0f64;
+    for _ in 1..j {
+        top *= p.b;
+    }
+    if !(p.u * top).is_finite() {
+        return Err(Error::param(
+            "J",
+            j,
+            format!(
+                "the top buffer's reference brightness u*b^(J-1) overflows f64 with b = {} \
+                 and u = {}",
+                fmt_f64(p.b),
+                fmt_f64(p.u)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The paper's `ρ_j`: the counts averaged over the present pixels that have samples.
+fn paper_rho(block: &[Option<&Zirr>; 9], len: usize) -> Vec<f64> {
+    let mut sum = vec![0.0f64; len];
+    let mut pixels = 0usize;
+    for px in block.iter().flatten() {
+        if px.c.n == 0 {
+            continue;
+        }
+        pixels += 1;
+        px.c.for_each_row(len, |j, _, n, _| sum[j] += n);
+    }
+    sum.iter().map(|s| s / pixels as f64).collect()
+}
+
+/// The released shader's `ρ_j`: nine counts over 9, missing pixels replaced clamp-to-edge.
+fn reference_rho(block: &[Option<&Zirr>; 9], len: usize) -> Vec<f64> {
+    let present = block.map(|px| px.is_some());
+    let column = |dx: usize| present[dx] || present[3 + dx] || present[6 + dx];
+    let row = |dy: usize| present[3 * dy] || present[3 * dy + 1] || present[3 * dy + 2];
+    let counts: [Option<Vec<f64>>; 9] = block.map(|px| px.map(|z| z.c.counts(len)));
+    let mut sum = vec![0.0f64; len];
+    for k in 0..9 {
+        let source = if present[k] {
+            k
+        } else {
+            let (dx, dy) = (k % 3, k / 3);
+            let dx = if column(dx) { dx } else { 1 };
+            let dy = if row(dy) { dy } else { 1 };
+            let s = 3 * dy + dx;
+            if present[s] { s } else { 4 }
+        };
+        if let Some(n) = &counts[source] {
+            for (acc, v) in sum.iter_mut().zip(n) {
+                *acc += v;
+            }
+        }
+    }
+    sum.iter().map(|s| s / 9.0).collect()
 }
 
 impl fmt::Display for Zirr {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "Zirr(")?;
-        self.c.write_params(f, true)?;
+        match self.flavor() {
+            Flavor::Paper => write!(f, "Zirr(")?,
+            Flavor::Reference => write!(f, "Zirr-ref(")?,
+        }
+        self.c.write_params(f, self.flavor() == Flavor::Paper)?;
         write!(f, ")")
     }
 }
@@ -856,7 +1092,10 @@ impl Estimator for Zirr {
     }
 
     fn push_slice(&mut self, samples: &[f64]) {
-        self.c.push_block(samples, None);
+        match &mut self.discarded {
+            None => self.c.push_block(samples, None),
+            Some(d) => self.c.push_block(samples, Some(d)),
+        }
     }
 
     fn count(&self) -> u64 {
@@ -867,201 +1106,12 @@ impl Estimator for Zirr {
         if self.c.n == 0 {
             return Err(super::empty(self));
         }
-        Ok(self.c.compose(Flavor::Paper, |_, n| n, |_, _, _, _| {}))
+        Ok(self.c.compose(self.flavor(), |_, n| n, |_, _, _, _| {}))
     }
 
     fn extras(&self) -> Extras {
-        self.c.report(Flavor::Paper, None).1
-    }
-
-    fn state_bytes(&self) -> usize {
-        std::mem::size_of::<Self>() + self.c.state_bytes()
-    }
-
-    fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::Zirr(self.c.params)
-    }
-
-    fn reset(&mut self) {
-        self.c.reset();
-    }
-}
-
-/// Zirr et al.'s method as in the authors' released code (docs/estimators.md §5a, spec string `zirr-ref`).
-///
-/// Extras, in order: `J_used`, `over_range`, `B`, `n`, `rho`, `w`, and `discarded`: the energy
-/// above `c_{J−1}` dropped at the top buffer, `Σ (S − c_{J−1}) / N` over the samples with
-/// `S/u ≥ p_{J−1}` — a per-sample mean like `B`, so `Σ B_j + discarded` is the plain mean.
-#[derive(Debug, Clone)]
-pub struct ZirrRef {
-    c: Cascade,
-    /// Rescaled before it overflows, like the buffers.
-    discarded: ScaledSum,
-}
-
-impl ZirrRef {
-    /// Checked constructor: as [`Zirr::new`], and moreover `J` fixed and at least 2,
-    /// `kappa_min = 1`, and `u·b^(J−1)` finite. Never panics.
-    pub fn new(p: ZirrParams) -> Result<Self> {
-        // zirr-ref's own rules on J come first, so its messages never suggest `auto`.
-        let CascadeSize::Fixed(j) = p.j else {
-            return Err(Error::param(
-                "J",
-                "auto",
-                "zirr-ref needs a fixed integer J (the released code's cascade is fixed)",
-            ));
-        };
-        if j < 2 {
-            return Err(Error::param(
-                "J",
-                j,
-                format!("zirr-ref needs an integer J in 2..={MAX_BUFFERS}"),
-            ));
-        }
-        let limit = check_common(&p)?;
-        if p.kappa_min != 1.0 {
-            return Err(Error::param(
-                "kappa_min",
-                fmt_f64(p.kappa_min),
-                "must be 1 for zirr-ref (the released code has no separate threshold)",
-            ));
-        }
-        let mut top = 1.0f64;
-        for _ in 1..j {
-            top *= p.b;
-        }
-        if !(p.u * top).is_finite() {
-            return Err(Error::param(
-                "J",
-                j,
-                format!(
-                    "the top buffer's reference brightness u*b^(J-1) overflows f64 with b = {} \
-                     and u = {}",
-                    fmt_f64(p.b),
-                    fmt_f64(p.u)
-                ),
-            ));
-        }
-        Ok(ZirrRef {
-            c: Cascade::new(p, limit),
-            discarded: ScaledSum::new(),
-        })
-    }
-
-    /// The parameters.
-    pub fn params(&self) -> ZirrParams {
-        self.c.params
-    }
-
-    /// The estimate of the centre pixel of a 3×3 block as the released shader computes it:
-    /// `ρ_j` = the sum of nine counts over 9, with clamp-to-edge substitution for missing
-    /// pixels and 0 for present pixels without samples (docs/estimators.md §5a; see the module docs).
-    /// Errors as [`Zirr::block_estimate`].
-    pub fn block_estimate(block: &[Option<&Self>; 9]) -> Result<(f64, Extras)> {
-        let (centre, rho) = Self::block_rho(block)?;
-        let (estimate, mut extras) = centre.c.report(Flavor::Reference, Some(&rho));
-        extras.push(("discarded", Extra::Float(centre.discarded_mean())));
-        Ok((estimate, extras))
-    }
-
-    /// Pushes one sample (the same as [`Estimator::push`]) and tells which buffers received
-    /// which fractions of it; a sample at or over the top buffer's reference brightness comes
-    /// back as [`Splat::Clamped`] (see [`Splat`]).
-    pub fn push_split(&mut self, sample: f64) -> Splat {
-        let splat = self.c.push_one(sample, true);
-        if let Splat::Clamped { v, .. } = splat {
-            self.discarded.add(sample - v);
-        }
-        splat
-    }
-
-    /// The weights `w_j` of the estimate, one per buffer (`J` of them): the estimate is
-    /// `Σ_j w_j·B_j`, summed in ascending `j`. Errors without samples.
-    pub fn weights(&self) -> Result<Vec<f64>> {
-        if self.c.n == 0 {
-            return Err(super::empty(self));
-        }
-        Ok(self.c.weights(Flavor::Reference, None))
-    }
-
-    /// The weights `w_j` of [`ZirrRef::block_estimate`]'s estimate for the centre of the
-    /// block. Errors as [`ZirrRef::block_estimate`].
-    pub fn block_weights(block: &[Option<&Self>; 9]) -> Result<Vec<f64>> {
-        let (centre, rho) = Self::block_rho(block)?;
-        Ok(centre.c.weights(Flavor::Reference, Some(&rho)))
-    }
-
-    /// The checked centre of a block and its rejection counts `ρ_j` (docs/estimators.md §5a).
-    fn block_rho<'a>(block: &[Option<&'a Self>; 9]) -> Result<(&'a Self, Vec<f64>)> {
-        let centre = check_block(block, |z: &ZirrRef| &z.c)?;
-        let len = centre.c.a.len();
-        let present = block.map(|px| px.is_some());
-        let column = |dx: usize| present[dx] || present[3 + dx] || present[6 + dx];
-        let row = |dy: usize| present[3 * dy] || present[3 * dy + 1] || present[3 * dy + 2];
-        let counts: [Option<Vec<f64>>; 9] = block.map(|px| px.map(|z| z.c.counts(len)));
-        let mut sum = vec![0.0f64; len];
-        for k in 0..9 {
-            let source = if present[k] {
-                k
-            } else {
-                let (dx, dy) = (k % 3, k / 3);
-                let dx = if column(dx) { dx } else { 1 };
-                let dy = if row(dy) { dy } else { 1 };
-                let s = 3 * dy + dx;
-                if present[s] { s } else { 4 }
-            };
-            if let Some(n) = &counts[source] {
-                for (acc, v) in sum.iter_mut().zip(n) {
-                    *acc += v;
-                }
-            }
-        }
-        let rho: Vec<f64> = sum.iter().map(|s| s / 9.0).collect();
-        Ok((centre, rho))
-    }
-
-    /// The discarded energy as a per-sample mean (0 without samples).
-    fn discarded_mean(&self) -> f64 {
-        if self.c.n == 0 {
-            0.0
-        } else {
-            self.discarded.mean(self.c.n)
-        }
-    }
-}
-
-impl fmt::Display for ZirrRef {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "Zirr-ref(")?;
-        self.c.write_params(f, false)?;
-        write!(f, ")")
-    }
-}
-
-impl Estimator for ZirrRef {
-    #[inline]
-    fn push(&mut self, sample: f64) {
-        self.push_slice(std::slice::from_ref(&sample));
-    }
-
-    fn push_slice(&mut self, samples: &[f64]) {
-        self.c.push_block(samples, Some(&mut self.discarded));
-    }
-
-    fn count(&self) -> u64 {
-        self.c.n
-    }
-
-    fn estimate(&self) -> Result<f64> {
-        if self.c.n == 0 {
-            return Err(super::empty(self));
-        }
-        Ok(self.c.compose(Flavor::Reference, |_, n| n, |_, _, _, _| {}))
-    }
-
-    fn extras(&self) -> Extras {
-        let mut extras = self.c.report(Flavor::Reference, None).1;
-        extras.push(("discarded", Extra::Float(self.discarded_mean())));
+        let mut extras = self.c.report(self.flavor(), None).1;
+        self.push_discarded(&mut extras);
         extras
     }
 
@@ -1070,12 +1120,17 @@ impl Estimator for ZirrRef {
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::ZirrRef(self.c.params)
+        match self.flavor() {
+            Flavor::Paper => ZirrSpec(self.c.params).into(),
+            Flavor::Reference => ZirrRefSpec(self.c.params).into(),
+        }
     }
 
     fn reset(&mut self) {
         self.c.reset();
-        self.discarded = ScaledSum::new();
+        if let Some(d) = &mut self.discarded {
+            *d = ScaledSum::new();
+        }
     }
 }
 
@@ -1144,7 +1199,7 @@ mod tests {
 
     #[test]
     fn reference_example() {
-        let mut z = ZirrRef::new(ZirrParams::REFERENCE).unwrap();
+        let mut z = Zirr::reference(ZirrParams::REFERENCE).unwrap();
         z.push_slice(&RUNNING);
         assert!(close(z.estimate().unwrap(), 5.616560523284569, 1e-12));
     }
@@ -1189,7 +1244,7 @@ mod tests {
                 ..ZirrParams::REFERENCE
             },
         ] {
-            let (mut a, mut b) = (ZirrRef::new(p).unwrap(), ZirrRef::new(p).unwrap());
+            let (mut a, mut b) = (Zirr::reference(p).unwrap(), Zirr::reference(p).unwrap());
             a.push_slice(&xs);
             let mut clamped = 0;
             for &x in &xs {
@@ -1203,8 +1258,8 @@ mod tests {
             assert_eq!(b.weights().unwrap(), floats(&b.extras(), "w"));
             let block = [Some(&b), None, None, None, Some(&a), None, None, None, None];
             assert_eq!(
-                ZirrRef::block_weights(&block).unwrap(),
-                floats(&ZirrRef::block_estimate(&block).unwrap().1, "w")
+                Zirr::block_weights(&block).unwrap(),
+                floats(&Zirr::block_estimate(&block).unwrap().1, "w")
             );
         }
         assert!(Zirr::new(ZirrParams::PAPER).unwrap().weights().is_err());

@@ -25,7 +25,7 @@ use super::claims::{CheckKind, ROUNDING_TOLERANCE};
 use super::experiment::Experiment;
 use super::law::GrandMeanNull;
 use super::runner::RunOutput;
-use crate::estimators::EstimatorSpec;
+use crate::estimators::{EstimatorSpec, MeanSpec, ZirrSpec};
 use serde::Serialize;
 use statrs::distribution::{Binomial, ContinuousCDF, DiscreteCDF, Normal};
 
@@ -115,7 +115,7 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
                 };
                 // Relative units (X / mu): finite at any scale of the law.
                 let moments = cell.relative_estimate_moments();
-                if let (EstimatorSpec::Mean, true) = (spec, cfg.unbiased_mean) {
+                if let (EstimatorSpec::Mean(MeanSpec), true) = (spec, cfg.unbiased_mean) {
                     let bias = moments.mean() - 1.0;
                     let null = d.mean_laws[i].as_ref().and_then(|l| l.null.as_ref());
                     let rel_var = dist.dist.relative_variance();
@@ -131,7 +131,7 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
                 }
                 if let Some((threshold, exceed)) = cell.exceedances() {
                     let (check, bound) = match spec {
-                        EstimatorSpec::Mean => {
+                        EstimatorSpec::Mean(MeanSpec) => {
                             (CheckKind::Chebyshev, 1.0 / (cfg.chebyshev_k.powi(2)))
                         }
                         _ => (CheckKind::MonBound, cfg.mon_delta),
@@ -146,7 +146,7 @@ pub fn evaluate(exp: &Experiment, out: &RunOutput) -> Vec<CheckResult> {
                     );
                     bounds.push((at, bound, rate));
                 }
-                if let (EstimatorSpec::Zirr(p), true) = (spec, cfg.zirr_bound) {
+                if let (EstimatorSpec::Zirr(ZirrSpec(p)), true) = (spec, cfg.zirr_bound) {
                     let trunc = dist.dist.truncated_moments(n as f64 * d.mu / p.kappa);
                     // Bound and variance both divided by mu^2.
                     let bound = trunc.variance / d.mu / d.mu / n as f64 + 1.0 / p.kappa;

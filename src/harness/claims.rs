@@ -3,7 +3,7 @@
 //! judge them) both read this module, and neither reads the other.
 
 use crate::dist::Dist;
-use crate::estimators::EstimatorSpec;
+use crate::estimators::{EstimatorSpec, MeanSpec, MonSpec};
 use serde::{Deserialize, Serialize};
 
 /// Every kind of check, as named in results, `checks.json` and `checks.findings`.
@@ -117,10 +117,10 @@ pub fn deviation_threshold(
     let nf = n as f64;
     let floor = ROUNDING_TOLERANCE * mu;
     match *spec {
-        EstimatorSpec::Mean if cfg.chebyshev_k > 0.0 => {
+        EstimatorSpec::Mean(MeanSpec) if cfg.chebyshev_k > 0.0 => {
             Some((cfg.chebyshev_k * sigma / nf.sqrt()).max(floor))
         }
-        EstimatorSpec::Mon { m }
+        EstimatorSpec::Mon(MonSpec { m })
             if cfg.mon_delta > 0.0 && m == mon_sets(cfg.mon_delta) && n >= m =>
         {
             Some((sigma * (32.0 * (1.0 / cfg.mon_delta).ln() / nf).sqrt()).max(floor))
@@ -142,7 +142,7 @@ pub fn unreachable(
         let mons: Vec<usize> = estimators
             .iter()
             .filter_map(|s| match s {
-                EstimatorSpec::Mon { m } => Some(*m),
+                EstimatorSpec::Mon(MonSpec { m }) => Some(*m),
                 _ => None,
             })
             .collect();

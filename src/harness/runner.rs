@@ -14,7 +14,7 @@ use super::law::MeanLaw;
 use super::metrics::{CellAccumulator, Observation};
 use super::unseen::{self, TailEffects};
 use crate::error::{Error, Result};
-use crate::estimators::{Estimator, EstimatorSpec, Mean, validate_samples};
+use crate::estimators::{Estimator, EstimatorSpec, Mean, MeanSpec, validate_samples};
 use crate::limits::{self, MemoryLimit};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
@@ -314,7 +314,7 @@ fn dist_result(
     trials: u64,
     total: BlockStats,
 ) -> DistResult {
-    let runs_mean = exp.estimators.contains(&EstimatorSpec::Mean);
+    let runs_mean = exp.estimators.contains(&EstimatorSpec::Mean(MeanSpec));
     let mean_laws = exp
         .file
         .checkpoints
@@ -584,7 +584,7 @@ fn run_chunk(
     let mean_index = exp
         .estimators
         .iter()
-        .position(|s| *s == EstimatorSpec::Mean);
+        .position(|s| *s == EstimatorSpec::Mean(MeanSpec));
     let mut samples = vec![0.0; exp.max_n()];
     let mut own_mean = vec![0.0; cps];
     let mut outlier = vec![false; cps];

@@ -325,7 +325,7 @@ pub fn render_with_nfor(
     let image_sigma = cfg
         .estimators
         .iter()
-        .any(|s| matches!(s, EstimatorSpec::Jung { .. }));
+        .any(|s| matches!(s, EstimatorSpec::Jung(_)));
 
     for &stop in &stops {
         let mut nfor_rows: Vec<Option<&mut [NforPixel]>> = if nfor {

@@ -2,7 +2,7 @@
 //! metric), the readable `summary.md`, and `manifest.json` with what produced them.
 
 use crate::error::{Error, Num, Result};
-use crate::estimators::EstimatorSpec;
+use crate::estimators::{EstimatorSpec, MeanSpec};
 use crate::harness::law;
 use crate::harness::metrics::{Caveat, Interval, LEVEL, Metric};
 use crate::harness::{CheckResult, Experiment, RunOutput};
@@ -25,7 +25,7 @@ pub fn rows(exp: &Experiment, out: &RunOutput) -> Vec<Row> {
     for d in &out.dists {
         let infinite_variance = d.variance.is_none();
         for (e, spec) in exp.estimators.iter().enumerate() {
-            let is_mean = *spec == EstimatorSpec::Mean;
+            let is_mean = *spec == EstimatorSpec::Mean(MeanSpec);
             for (i, &n) in cps.iter().enumerate() {
                 let Some(mut m) = d.cells[e * cps.len() + i].metrics(d.mu) else {
                     continue;

@@ -197,7 +197,7 @@ pub fn measure(
             .zip(specs)
             .map(|((push, read), spec)| EstimatorCost {
                 push_ns_per_sample: (push
-                    + if matches!(spec, EstimatorSpec::Jung { .. }) {
+                    + if matches!(spec, EstimatorSpec::Jung(_)) {
                         sigma_s
                     } else {
                         0.0

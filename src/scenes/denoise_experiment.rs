@@ -46,7 +46,7 @@ use super::experiment::{MIN_SIDE, Scene, plain_name};
 use super::nfor_input::{ColorSource, VarianceSource};
 use super::tables::label;
 use crate::error::{Error, Result};
-use crate::estimators::EstimatorSpec;
+use crate::estimators::{EstimatorSpec, MeanSpec};
 use crate::image::metrics::FireflyRule;
 use crate::limits::shorten;
 use crate::render::film::MIN_NFOR_SPP;
@@ -334,7 +334,7 @@ impl DenoiseExperiment {
             if sources.iter().any(|o| o.spec == spec) {
                 return Err((entry, format!("repeats the estimator {spec}")));
             }
-            let color = if spec == EstimatorSpec::Mean {
+            let color = if spec == EstimatorSpec::Mean(MeanSpec) {
                 ColorSource::Mean
             } else {
                 ColorSource::Estimator(spec.to_string())

@@ -333,9 +333,9 @@ impl ScenesExperiment {
             let spec: EstimatorSpec = s.parse().map_err(|e| at(entry.clone(), &e))?;
             if !matches!(
                 spec,
-                EstimatorSpec::PajotRot { .. }
-                    | EstimatorSpec::PajotAdr { .. }
-                    | EstimatorSpec::PajotHybrid { .. }
+                EstimatorSpec::PajotRot(_)
+                    | EstimatorSpec::PajotAdr(_)
+                    | EstimatorSpec::PajotHybrid(_)
             ) {
                 return Err(at(entry, &"only Pajot et al.'s estimators delay samples"));
             }

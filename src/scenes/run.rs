@@ -6,7 +6,7 @@ use super::cost::{self, CostReport, process_cpu_seconds};
 use super::experiment::{Scene, ScenesExperiment};
 use super::tables::{CostRow, DelayedRow, MetricRow, SceneInfo, label};
 use crate::error::{Error, Result};
-use crate::estimators::{Estimator, EstimatorSpec, Extra, luminance};
+use crate::estimators::{Estimator, EstimatorSpec, Extra, MeanSpec, luminance};
 use crate::image::Image;
 use crate::image::metrics::{FireflyRule, Metrics, display_luma};
 use crate::limits::MemoryLimit;
@@ -395,7 +395,7 @@ pub fn run_scene(
         0 => None,
         spp => {
             let cfg = FilmConfig {
-                estimators: vec![EstimatorSpec::Mean],
+                estimators: vec![EstimatorSpec::Mean(MeanSpec)],
                 spp,
                 checkpoints: Vec::new(),
                 ..cfg.clone()
@@ -487,7 +487,7 @@ pub fn run_scene(
             let mean = exp
                 .estimators
                 .iter()
-                .position(|s| *s == EstimatorSpec::Mean);
+                .position(|s| *s == EstimatorSpec::Mean(MeanSpec));
             let probe = mean
                 .and_then(|e| image_at(e, crop_spp))
                 .or_else(|| crop_images.first().map(|c| c.1.clone()));

@@ -8,7 +8,10 @@
 //! spec strings), so a table can be rebuilt from `metrics.csv` and tested on hand-made rows.
 
 use crate::error::{Error, Result};
-use crate::estimators::{CascadeSize, EstimatorSpec};
+use crate::estimators::{
+    CascadeSize, ClampSpec, EstimatorSpec, GiniSpec, GmonBSpec, GmonSpec, JungSpec, MeanSpec,
+    MonSpec, PajotAdrSpec, PajotHybridSpec, PajotRotSpec, ZirrRefSpec, ZirrSpec,
+};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -180,24 +183,24 @@ pub fn label(spec: &EstimatorSpec) -> String {
         s
     };
     match spec {
-        EstimatorSpec::Mean => "mean".into(),
-        EstimatorSpec::Clamp { c } => format!("clamp c={}", fmt(*c)),
-        EstimatorSpec::Mon { m } => format!("MoN M={m}"),
-        EstimatorSpec::Gini { m } => format!("Gini M={m}"),
-        EstimatorSpec::GmonB { m, threshold } => {
+        EstimatorSpec::Mean(MeanSpec) => "mean".into(),
+        EstimatorSpec::Clamp(ClampSpec { c }) => format!("clamp c={}", fmt(*c)),
+        EstimatorSpec::Mon(MonSpec { m }) => format!("MoN M={m}"),
+        EstimatorSpec::Gini(GiniSpec { m }) => format!("Gini M={m}"),
+        EstimatorSpec::GmonB(GmonBSpec { m, threshold }) => {
             if *threshold == 0.25 {
                 format!("G-MoN_b M={m}")
             } else {
                 format!("G-MoN_b M={m} t={}", fmt(*threshold))
             }
         }
-        EstimatorSpec::Gmon { m } => format!("G-MoN M={m}"),
-        EstimatorSpec::Jung { m_max, .. } => format!("Jung m_max={m_max}"),
-        EstimatorSpec::Zirr(p) => zirr("Zirr", p, CascadeSize::Auto),
-        EstimatorSpec::ZirrRef(p) => zirr("zirr-ref", p, CascadeSize::Fixed(6)),
-        EstimatorSpec::PajotRot { learn } => pajot("Pajot ROT", *learn),
-        EstimatorSpec::PajotAdr { learn } => pajot("Pajot ADR", *learn),
-        EstimatorSpec::PajotHybrid { learn, .. } => pajot("Pajot ADR+ROT", *learn),
+        EstimatorSpec::Gmon(GmonSpec { m }) => format!("G-MoN M={m}"),
+        EstimatorSpec::Jung(JungSpec { m_max, .. }) => format!("Jung m_max={m_max}"),
+        EstimatorSpec::Zirr(ZirrSpec(p)) => zirr("Zirr", p, CascadeSize::Auto),
+        EstimatorSpec::ZirrRef(ZirrRefSpec(p)) => zirr("zirr-ref", p, CascadeSize::Fixed(6)),
+        EstimatorSpec::PajotRot(PajotRotSpec { learn }) => pajot("Pajot ROT", *learn),
+        EstimatorSpec::PajotAdr(PajotAdrSpec { learn }) => pajot("Pajot ADR", *learn),
+        EstimatorSpec::PajotHybrid(PajotHybridSpec { learn, .. }) => pajot("Pajot ADR+ROT", *learn),
     }
 }
 
@@ -359,13 +362,15 @@ pub fn table1(rows: &[MetricRow]) -> Vec<Table1Row> {
             .filter(|r| r.scene == scene && r.spp == spp)
             .filter_map(|r| r.estimator.parse().ok().map(|s| (r, s)))
             .collect();
-        let mean = at_end.iter().find(|(_, s)| *s == EstimatorSpec::Mean);
+        let mean = at_end
+            .iter()
+            .find(|(_, s)| *s == EstimatorSpec::Mean(MeanSpec));
         let mut ms: Vec<usize> = at_end
             .iter()
             .filter_map(|(_, s)| match s {
-                EstimatorSpec::Mon { m }
-                | EstimatorSpec::GmonB { m, .. }
-                | EstimatorSpec::Gmon { m } => Some(*m),
+                EstimatorSpec::Mon(MonSpec { m })
+                | EstimatorSpec::GmonB(GmonBSpec { m, .. })
+                | EstimatorSpec::Gmon(GmonSpec { m }) => Some(*m),
                 _ => None,
             })
             .collect();
@@ -378,9 +383,9 @@ pub fn table1(rows: &[MetricRow]) -> Vec<Table1Row> {
             }
             let of = |f: Family| {
                 at_end.iter().find(|(_, s)| match (f, s) {
-                    (Family::Mon, EstimatorSpec::Mon { m: k })
-                    | (Family::GmonB, EstimatorSpec::GmonB { m: k, .. })
-                    | (Family::Gmon, EstimatorSpec::Gmon { m: k }) => *k == m,
+                    (Family::Mon, EstimatorSpec::Mon(MonSpec { m: k }))
+                    | (Family::GmonB, EstimatorSpec::GmonB(GmonBSpec { m: k, .. }))
+                    | (Family::Gmon, EstimatorSpec::Gmon(GmonSpec { m: k })) => *k == m,
                     _ => false,
                 })
             };
@@ -489,7 +494,7 @@ pub fn zirr_points(rows: &[MetricRow]) -> Vec<ZirrPoint> {
             .iter()
             .filter(|r| r.scene == scene && r.spp == spp)
             .filter_map(|r| match r.estimator.parse() {
-                Ok(EstimatorSpec::Zirr(p)) => Some(ZirrPoint {
+                Ok(EstimatorSpec::Zirr(ZirrSpec(p))) => Some(ZirrPoint {
                     scene: scene.to_string(),
                     b: p.b,
                     kappa: p.kappa,

@@ -1105,7 +1105,7 @@ mod tests {
             trials: 4096,
             checkpoints: vec![4, 16, 64, 256],
             tau: 1.0,
-            estimators: vec![EstimatorSpec::Mean],
+            estimators: vec![crate::estimators::MeanSpec.into()],
             estimator_texts: vec!["mean".into()],
         };
         let r = transfer_pixel(

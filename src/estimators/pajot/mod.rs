@@ -133,13 +133,93 @@ mod tests;
 
 pub use adr::{PajotMode, adr_bandwidths};
 
-use super::{Estimator, EstimatorSpec, Extra, Extras};
+use super::rgb::pajot_rgb;
+use super::{Estimator, EstimatorSpec, Extra, Extras, Key, Method, RgbEstimator};
 use crate::error::{Error, Result};
 use adr::Adr;
 use ledger::Ledger;
 use rot::Rot;
 use std::borrow::Cow;
 use std::fmt;
+
+/// `pajot-rot:learn=` (`learn` 50 by default).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PajotRotSpec {
+    /// Learning-phase length.
+    pub learn: usize,
+}
+
+impl Method for PajotRotSpec {
+    const NAME: &'static str = "pajot-rot";
+    const KEYS: &'static [Key<Self>] = &[Key::int("learn", |s| &mut s.learn)];
+    const DEFAULT: Self = PajotRotSpec { learn: 50 };
+    const CONSTANT_MEMORY: bool = false;
+
+    fn build(&self) -> Result<Box<dyn Estimator>> {
+        Ok(Box::new(PajotRot::new(self.learn)?))
+    }
+
+    fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
+        Ok(pajot_rgb(PajotRot::new(self.learn)?, self.learn))
+    }
+}
+
+/// `pajot-adr:learn=` (`learn` 50 by default).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PajotAdrSpec {
+    /// Learning-phase length.
+    pub learn: usize,
+}
+
+impl Method for PajotAdrSpec {
+    const NAME: &'static str = "pajot-adr";
+    const KEYS: &'static [Key<Self>] = &[Key::int("learn", |s| &mut s.learn)];
+    const DEFAULT: Self = PajotAdrSpec { learn: 50 };
+    const CONSTANT_MEMORY: bool = false;
+
+    fn build(&self) -> Result<Box<dyn Estimator>> {
+        Ok(Box::new(PajotAdr::new(self.learn)?))
+    }
+
+    fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
+        Ok(pajot_rgb(PajotAdr::new(self.learn)?, self.learn))
+    }
+}
+
+/// `pajot-hybrid:learn=,T=,delta=` (defaults 50, 2 and 0).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PajotHybridSpec {
+    /// Learning-phase length.
+    pub learn: usize,
+    /// Successive agreeing updates before switching to ROT.
+    pub t: usize,
+    /// Relative agreement tolerance.
+    pub delta: f64,
+}
+
+impl Method for PajotHybridSpec {
+    const NAME: &'static str = "pajot-hybrid";
+    const KEYS: &'static [Key<Self>] = &[
+        Key::int("learn", |s| &mut s.learn),
+        Key::int("T", |s| &mut s.t),
+        Key::float("delta", |s| &mut s.delta),
+    ];
+    const DEFAULT: Self = PajotHybridSpec {
+        learn: 50,
+        t: 2,
+        delta: 0.0,
+    };
+    const CONSTANT_MEMORY: bool = false;
+
+    fn build(&self) -> Result<Box<dyn Estimator>> {
+        Ok(Box::new(PajotHybrid::new(self.learn, self.t, self.delta)?))
+    }
+
+    fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
+        let p = PajotHybrid::new(self.learn, self.t, self.delta)?;
+        Ok(pajot_rgb(p, self.learn))
+    }
+}
 
 /// Calls `emit(lo, hi, count)` for each run of consecutive values of the ascending `xs` in
 /// which `linked(i)` holds between `xs[i]` and `xs[i + 1]`.
@@ -181,51 +261,90 @@ fn learn_count(learn: usize) -> u64 {
     u64::try_from(learn).unwrap_or(u64::MAX)
 }
 
-/// Extras common to the three estimators.
-fn common_extras(ledger: &Ledger, m: f64) -> Extras {
-    let mut x: Extras = vec![
-        ("delayed", Extra::Int(ledger.delayed() as u64)),
-        ("m", Extra::Float(m)),
-    ];
-    if ledger.cap() != usize::MAX {
-        x.push(("dropped", Extra::Int(ledger.dropped())));
-    }
-    x
-}
-
-fn fmt_cap(f: &mut fmt::Formatter<'_>, ledger: &Ledger) -> fmt::Result {
-    if ledger.cap() != usize::MAX {
-        write!(f, ",max_delayed={}", ledger.cap())?;
-    }
-    Ok(())
+/// Pajot et al.'s outlier delaying (module docs), one type for the three methods: the learning
+/// phase, the ledger of accepted and delayed samples and the estimate are shared, and the bound
+/// strategy `B` ([`RotBound`], [`AdrBound`] or [`HybridBound`]) decides how the acceptance
+/// bound `m` is learnt and moved. [`PajotRot`], [`PajotAdr`] and [`PajotHybrid`] name the three.
+#[derive(Debug, Clone)]
+pub struct Pajot<B> {
+    learn: usize,
+    n: u64,
+    learning: Vec<f64>,
+    bound: B,
+    ledger: Ledger,
 }
 
 /// Pajot et al.'s outlier delaying with the rule-of-thumb bandwidth (docs/estimators.md §6.2),
 /// `pajot-rot:learn=50`.
-#[derive(Debug, Clone)]
-pub struct PajotRot {
-    learn: usize,
-    n: u64,
-    learning: Vec<f64>,
-    rot: Rot,
-    ledger: Ledger,
+pub type PajotRot = Pajot<RotBound>;
+
+/// Pajot et al.'s outlier delaying with adaptive bandwidths over the approximate distribution
+/// representation (docs/estimators.md §6.3), `pajot-adr:learn=50`.
+pub type PajotAdr = Pajot<AdrBound>;
+
+/// ADR and ROT side by side, switching to ROT alone once their bounds agree `T` times in a row
+/// within `δ` (docs/estimators.md §6.4), `pajot-hybrid:learn=50,T=2,delta=0`.
+pub type PajotHybrid = Pajot<HybridBound>;
+
+/// What a bound strategy asks of the ledger for one non-black sample after learning.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Step {
+    /// Settle the ledger at this `(bound, floor)` first (the bound or floor moved).
+    settle: Option<(f64, f64)>,
+    /// Place the sample against `(bound, floor)`; `None` accepts it without remembering it.
+    place: Option<(f64, f64)>,
 }
 
-impl PajotRot {
-    /// A ROT estimator learning from the first `learn` samples (any value is valid; `0` skips
-    /// learning). Returns `Result` like every estimator constructor.
-    pub fn new(learn: usize) -> Result<Self> {
-        Ok(PajotRot {
+/// How a [`Pajot`] estimator learns and moves its acceptance bound. Implemented by the three
+/// strategies of this module only.
+pub trait BoundStrategy: Clone + fmt::Debug + Send + Sync + 'static {
+    /// Whether the strategy sees every learning-phase log in arrival order (ROT's moments).
+    const OBSERVES_LEARNING: bool;
+
+    /// One learning-phase log, in arrival order (only when `OBSERVES_LEARNING`).
+    fn observe(&mut self, l: f64);
+
+    /// Ends learning on the sorted logs of the stored samples; `index` is the 0-based index of
+    /// the sample ending it. Returns the `(bound, floor)` to place the stored samples against.
+    fn learn_end(&mut self, logs: &[f64], index: u64) -> (f64, f64);
+
+    /// Takes the non-black sample `index` with log `l` after learning (`kept`: the ledger's
+    /// kept list) and says what the ledger does with it.
+    fn step(&mut self, l: f64, index: u64, kept: &[f64]) -> Step;
+
+    /// The acceptance bound `m` (log units, `-inf` before any extended mode).
+    fn bound(&self) -> f64;
+
+    /// The strategy's extras after the shared ones.
+    fn extras(&self, x: &mut Extras);
+
+    /// Heap bytes held.
+    fn heap_bytes(&self) -> usize;
+
+    /// Back to the state before any sample (keeping allocations where it can).
+    fn reset(&mut self);
+
+    /// Writes the display form up to and including the parameters (`Pajot-ROT(learn=50`).
+    fn describe(&self, learn: usize, f: &mut fmt::Formatter<'_>) -> fmt::Result;
+
+    /// The spec of an estimator learning for `learn` samples with this strategy.
+    fn spec(&self, learn: usize) -> EstimatorSpec;
+}
+
+impl<B: BoundStrategy> Pajot<B> {
+    fn with_bound(learn: usize, bound: B) -> Self {
+        Pajot {
             learn,
             n: 0,
             learning: Vec::new(),
-            rot: Rot::NEW,
+            bound,
             ledger: Ledger::new(usize::MAX),
-        })
+        }
     }
 
-    /// Bounds the delayed list to `k` samples: when full, the largest delayed sample is dropped
-    /// for good (module doc, decision 10). Not part of the spec-string grammar. A builder: it
+    /// Bounds the delayed list (for the hybrid: the kept list of delayed samples and ROT's
+    /// accepted overlap points) to `k` samples: when full, the largest entry is dropped for
+    /// good (module doc, decision 10). Not part of the spec-string grammar. A builder: it
     /// resets the estimator, so call it before pushing samples.
     pub fn with_max_delayed(mut self, k: usize) -> Self {
         self.ledger = Ledger::new(k);
@@ -238,14 +357,10 @@ impl PajotRot {
         Some(self.ledger.cap()).filter(|&k| k != usize::MAX)
     }
 
-    /// The current eq. 5 half-width `h` over every non-black log seen (0 for at most one).
-    pub fn bandwidth(&self) -> f64 {
-        self.settled().rot.bandwidth()
-    }
-
-    /// The acceptance bound `m` (log units; `-inf` before any extended mode).
+    /// The acceptance bound `m` (log units; `-inf` before any extended mode); the hybrid's
+    /// `m_h`.
     pub fn bound(&self) -> f64 {
-        self.settled().rot.m
+        self.settled().bound.bound()
     }
 
     /// Number of samples currently delayed.
@@ -279,17 +394,22 @@ impl PajotRot {
     }
 
     fn finish_learning(&mut self) {
-        let (values, logs) =
-            sorted_with_logs(std::mem::take(&mut self.learning), Some(&mut self.rot));
-        self.rot.learn_end(&logs);
-        let m = self.rot.m;
+        let values = std::mem::take(&mut self.learning);
+        if B::OBSERVES_LEARNING {
+            for &s in &values {
+                self.bound.observe(s.ln());
+            }
+        }
+        let (values, logs) = sorted_with_logs(values, None);
+        let (bound, floor) = self.bound.learn_end(&logs, self.n.saturating_sub(1));
         for (&s, &l) in values.iter().zip(&logs) {
-            self.ledger.place(s, l, m, m);
+            self.ledger.place(s, l, bound, floor);
         }
     }
 
     #[inline(always)]
     fn push_one(&mut self, s: f64) {
+        let index = self.n;
         self.n += 1;
         if self.n <= learn_count(self.learn) {
             if s == 0.0 {
@@ -307,32 +427,28 @@ impl PajotRot {
             return;
         }
         let l = s.ln();
-        self.rot.observe(l);
-        if l <= self.rot.m {
-            self.ledger.accept(s);
-            return;
+        let step = self.bound.step(l, index, self.ledger.kept());
+        if let Some((bound, floor)) = step.settle {
+            self.ledger.settle(bound, floor);
         }
-        self.update(s, l);
-    }
-
-    #[inline(never)]
-    fn update(&mut self, s: f64, l: f64) {
-        if self.rot.update(l, self.ledger.kept()) {
-            self.ledger.settle(self.rot.m, self.rot.m);
+        match step.place {
+            None => self.ledger.accept(s),
+            Some((bound, floor)) => self.ledger.place(s, l, bound, floor),
         }
-        self.ledger.place(s, l, self.rot.m, self.rot.m);
     }
 }
 
-impl fmt::Display for PajotRot {
+impl<B: BoundStrategy> fmt::Display for Pajot<B> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "Pajot-ROT(learn={}", self.learn)?;
-        fmt_cap(f, &self.ledger)?;
+        self.bound.describe(self.learn, f)?;
+        if self.ledger.cap() != usize::MAX {
+            write!(f, ",max_delayed={}", self.ledger.cap())?;
+        }
         write!(f, ")")
     }
 }
 
-impl Estimator for PajotRot {
+impl<B: BoundStrategy> Estimator for Pajot<B> {
     fn push(&mut self, sample: f64) {
         self.push_one(sample);
     }
@@ -356,175 +472,14 @@ impl Estimator for PajotRot {
 
     fn extras(&self) -> Extras {
         let s = self.settled();
-        common_extras(&s.ledger, s.rot.m)
-    }
-
-    fn state_bytes(&self) -> usize {
-        size_of::<Self>() + self.learning.capacity() * size_of::<f64>() + self.ledger.heap_bytes()
-    }
-
-    fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::PajotRot { learn: self.learn }
-    }
-
-    fn reset(&mut self) {
-        self.n = 0;
-        self.learning.clear();
-        self.rot = Rot::NEW;
-        self.ledger.clear();
-    }
-}
-
-/// Pajot et al.'s outlier delaying with adaptive bandwidths over the approximate distribution
-/// representation (docs/estimators.md §6.3), `pajot-adr:learn=50`.
-#[derive(Debug, Clone)]
-pub struct PajotAdr {
-    learn: usize,
-    n: u64,
-    learning: Vec<f64>,
-    adr: Adr,
-    ledger: Ledger,
-}
-
-impl PajotAdr {
-    /// An ADR estimator learning from the first `learn` samples (any value is valid).
-    pub fn new(learn: usize) -> Result<Self> {
-        Ok(PajotAdr {
-            learn,
-            n: 0,
-            learning: Vec::new(),
-            adr: Adr::NEW,
-            ledger: Ledger::new(usize::MAX),
-        })
-    }
-
-    /// Bounds the delayed list to `k` samples (module doc, decision 10). A builder: it resets
-    /// the estimator.
-    pub fn with_max_delayed(mut self, k: usize) -> Self {
-        self.ledger = Ledger::new(k);
-        self.reset();
-        self
-    }
-
-    /// The bound on the delayed list, if any.
-    pub fn max_delayed(&self) -> Option<usize> {
-        Some(self.ledger.cap()).filter(|&k| k != usize::MAX)
-    }
-
-    /// The acceptance bound `m`: the top of the last extended mode (`-inf` if none).
-    pub fn bound(&self) -> f64 {
-        self.settled().adr.m
-    }
-
-    /// Number of samples currently delayed.
-    pub fn delayed(&self) -> u64 {
-        self.settled().ledger.delayed() as u64
-    }
-
-    /// Number of delayed samples dropped because the list was full.
-    pub fn dropped(&self) -> u64 {
-        self.settled().ledger.dropped()
-    }
-
-    /// Number of accepted samples, black ones included (the estimate's divisor).
-    pub fn accepted(&self) -> u64 {
-        self.settled().ledger.accepted()
-    }
-
-    /// The modes, ascending.
-    pub fn modes(&self) -> Vec<PajotMode> {
-        self.settled().adr.public_modes()
-    }
-
-    fn is_learning(&self) -> bool {
-        self.n < learn_count(self.learn)
-    }
-
-    fn settled(&self) -> Cow<'_, Self> {
-        if self.is_learning() {
-            let mut copy = self.clone();
-            copy.finish_learning();
-            Cow::Owned(copy)
-        } else {
-            Cow::Borrowed(self)
+        let mut x: Extras = vec![
+            ("delayed", Extra::Int(s.ledger.delayed() as u64)),
+            ("m", Extra::Float(s.bound.bound())),
+        ];
+        if s.ledger.cap() != usize::MAX {
+            x.push(("dropped", Extra::Int(s.ledger.dropped())));
         }
-    }
-
-    fn finish_learning(&mut self) {
-        let (values, logs) = sorted_with_logs(std::mem::take(&mut self.learning), None);
-        self.adr.learn_end(&logs);
-        let m = self.adr.m;
-        for (&s, &l) in values.iter().zip(&logs) {
-            self.ledger.place(s, l, m, m);
-        }
-    }
-
-    #[inline(always)]
-    fn push_one(&mut self, s: f64) {
-        self.n += 1;
-        if self.n <= learn_count(self.learn) {
-            if s == 0.0 {
-                self.ledger.zero();
-            } else {
-                store(&mut self.learning, self.learn, s);
-            }
-            if self.n == learn_count(self.learn) {
-                self.finish_learning();
-            }
-            return;
-        }
-        if s == 0.0 {
-            self.ledger.zero();
-            return;
-        }
-        let l = s.ln();
-        if self.adr.update(l) {
-            self.ledger.settle(self.adr.m, self.adr.m);
-        }
-        if l <= self.adr.m {
-            self.ledger.accept(s);
-        } else {
-            self.ledger.place(s, l, self.adr.m, self.adr.m);
-        }
-    }
-}
-
-impl fmt::Display for PajotAdr {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "Pajot-ADR(learn={}", self.learn)?;
-        fmt_cap(f, &self.ledger)?;
-        write!(f, ")")
-    }
-}
-
-impl Estimator for PajotAdr {
-    fn push(&mut self, sample: f64) {
-        self.push_one(sample);
-    }
-
-    fn push_slice(&mut self, samples: &[f64]) {
-        for &s in samples {
-            self.push_one(s);
-        }
-    }
-
-    fn count(&self) -> u64 {
-        self.n
-    }
-
-    fn estimate(&self) -> Result<f64> {
-        if self.n == 0 {
-            return Err(super::empty(self));
-        }
-        Ok(self.settled().ledger.mean())
-    }
-
-    fn extras(&self) -> Extras {
-        let s = self.settled();
-        let mut x = common_extras(&s.ledger, s.adr.m);
-        let (single, extended) = s.adr.mode_counts();
-        x.push(("modes_single", Extra::Int(single)));
-        x.push(("modes_extended", Extra::Int(extended)));
+        s.bound.extras(&mut x);
         x
     }
 
@@ -532,31 +487,178 @@ impl Estimator for PajotAdr {
         size_of::<Self>()
             + self.learning.capacity() * size_of::<f64>()
             + self.ledger.heap_bytes()
-            + self.adr.heap_bytes()
+            + self.bound.heap_bytes()
     }
 
     fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::PajotAdr { learn: self.learn }
+        self.bound.spec(self.learn)
     }
 
     fn reset(&mut self) {
         self.n = 0;
         self.learning.clear();
-        self.adr.modes.clear();
-        self.adr.m = f64::NEG_INFINITY;
+        self.bound.reset();
         self.ledger.clear();
     }
 }
 
-/// ADR and ROT side by side, switching to ROT alone once their bounds agree `T` times in a row
-/// within `δ` (docs/estimators.md §6.4), `pajot-hybrid:learn=50,T=2,delta=0`.
+/// ROT's bound: the rule-of-thumb bandwidth over the running moments of the logs.
 #[derive(Debug, Clone)]
-pub struct PajotHybrid {
-    learn: usize,
+pub struct RotBound {
+    rot: Rot,
+}
+
+impl PajotRot {
+    /// A ROT estimator learning from the first `learn` samples (any value is valid; `0` skips
+    /// learning). Returns `Result` like every estimator constructor.
+    pub fn new(learn: usize) -> Result<Self> {
+        Ok(Pajot::with_bound(learn, RotBound { rot: Rot::NEW }))
+    }
+
+    /// The current eq. 5 half-width `h` over every non-black log seen (0 for at most one).
+    pub fn bandwidth(&self) -> f64 {
+        self.settled().bound.rot.bandwidth()
+    }
+}
+
+impl BoundStrategy for RotBound {
+    const OBSERVES_LEARNING: bool = true;
+
+    fn observe(&mut self, l: f64) {
+        self.rot.observe(l);
+    }
+
+    fn learn_end(&mut self, logs: &[f64], _: u64) -> (f64, f64) {
+        self.rot.learn_end(logs);
+        (self.rot.m, self.rot.m)
+    }
+
+    #[inline(always)]
+    fn step(&mut self, l: f64, _: u64, kept: &[f64]) -> Step {
+        self.rot.observe(l);
+        if l <= self.rot.m {
+            return Step {
+                settle: None,
+                place: None,
+            };
+        }
+        self.update(l, kept)
+    }
+
+    fn bound(&self) -> f64 {
+        self.rot.m
+    }
+
+    fn extras(&self, _: &mut Extras) {}
+
+    fn heap_bytes(&self) -> usize {
+        0
+    }
+
+    fn reset(&mut self) {
+        self.rot = Rot::NEW;
+    }
+
+    fn describe(&self, learn: usize, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Pajot-ROT(learn={learn}")
+    }
+
+    fn spec(&self, learn: usize) -> EstimatorSpec {
+        PajotRotSpec { learn }.into()
+    }
+}
+
+impl RotBound {
+    /// A sample above `m`: ROT's overlap test against the kept samples.
+    #[inline(never)]
+    fn update(&mut self, l: f64, kept: &[f64]) -> Step {
+        let moved = self.rot.update(l, kept);
+        let m = self.rot.m;
+        let settle = moved.then_some((m, m));
+        Step {
+            settle,
+            place: Some((m, m)),
+        }
+    }
+}
+
+/// ADR's bound: the top of the last extended mode of the approximate distribution
+/// representation.
+#[derive(Debug, Clone)]
+pub struct AdrBound {
+    adr: Adr,
+}
+
+impl PajotAdr {
+    /// An ADR estimator learning from the first `learn` samples (any value is valid).
+    pub fn new(learn: usize) -> Result<Self> {
+        Ok(Pajot::with_bound(learn, AdrBound { adr: Adr::NEW }))
+    }
+
+    /// The modes, ascending.
+    pub fn modes(&self) -> Vec<PajotMode> {
+        self.settled().bound.adr.public_modes()
+    }
+}
+
+/// Empties an ADR representation, keeping its allocation.
+fn clear_adr(adr: &mut Adr) {
+    adr.modes.clear();
+    adr.m = f64::NEG_INFINITY;
+}
+
+impl BoundStrategy for AdrBound {
+    const OBSERVES_LEARNING: bool = false;
+
+    fn observe(&mut self, _: f64) {}
+
+    fn learn_end(&mut self, logs: &[f64], _: u64) -> (f64, f64) {
+        self.adr.learn_end(logs);
+        (self.adr.m, self.adr.m)
+    }
+
+    #[inline(always)]
+    fn step(&mut self, l: f64, _: u64, _: &[f64]) -> Step {
+        let settle = self.adr.update(l).then_some((self.adr.m, self.adr.m));
+        let m = self.adr.m;
+        Step {
+            settle,
+            place: if l <= m { None } else { Some((m, m)) },
+        }
+    }
+
+    fn bound(&self) -> f64 {
+        self.adr.m
+    }
+
+    fn extras(&self, x: &mut Extras) {
+        let (single, extended) = self.adr.mode_counts();
+        x.push(("modes_single", Extra::Int(single)));
+        x.push(("modes_extended", Extra::Int(extended)));
+    }
+
+    fn heap_bytes(&self) -> usize {
+        self.adr.heap_bytes()
+    }
+
+    fn reset(&mut self) {
+        clear_adr(&mut self.adr);
+    }
+
+    fn describe(&self, learn: usize, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Pajot-ADR(learn={learn}")
+    }
+
+    fn spec(&self, learn: usize) -> EstimatorSpec {
+        PajotAdrSpec { learn }.into()
+    }
+}
+
+/// The hybrid's bound `m_h` over ROT and ADR side by side, and the switch to ROT alone.
+#[derive(Debug, Clone)]
+pub struct HybridBound {
     t: usize,
     delta: f64,
-    n: u64,
-    learning: Vec<f64>,
     rot: Rot,
     /// `None` once switched to ROT alone.
     adr: Option<Adr>,
@@ -565,7 +667,6 @@ pub struct PajotHybrid {
     m: f64,
     streak: usize,
     switch_index: Option<u64>,
-    ledger: Ledger,
 }
 
 impl PajotHybrid {
@@ -578,71 +679,35 @@ impl PajotHybrid {
         if !(delta >= 0.0 && delta.is_finite()) {
             return Err(Error::param("delta", delta, "must be finite and >= 0"));
         }
-        Ok(PajotHybrid {
-            learn,
+        let bound = HybridBound {
             t,
             delta,
-            n: 0,
-            learning: Vec::new(),
             rot: Rot::NEW,
             adr: Some(Adr::NEW),
             adr_last: f64::NEG_INFINITY,
             m: f64::NEG_INFINITY,
             streak: 0,
             switch_index: None,
-            ledger: Ledger::new(usize::MAX),
-        })
-    }
-
-    /// Bounds the kept list (delayed samples and ROT's accepted overlap points) to `k` samples
-    /// (module doc, decision 10). A builder: it resets the estimator.
-    pub fn with_max_delayed(mut self, k: usize) -> Self {
-        self.ledger = Ledger::new(k);
-        self.reset();
-        self
-    }
-
-    /// The bound on the kept list, if any.
-    pub fn max_delayed(&self) -> Option<usize> {
-        Some(self.ledger.cap()).filter(|&k| k != usize::MAX)
-    }
-
-    /// The hybrid's acceptance bound `m_h`.
-    pub fn bound(&self) -> f64 {
-        self.settled().m
+        };
+        Ok(Pajot::with_bound(learn, bound))
     }
 
     /// ROT's bound `m_ROT` (the same as a standalone [`PajotRot`] on the same stream, without
     /// a cap on the list).
     pub fn rot_bound(&self) -> f64 {
-        self.settled().rot.m
+        self.settled().bound.rot.m
     }
 
     /// ADR's bound `m_ADR` (the same as a standalone [`PajotAdr`] on the same stream until the
     /// switch; frozen at the switch).
     pub fn adr_bound(&self) -> f64 {
-        let s = self.settled();
-        s.adr.as_ref().map_or(s.adr_last, |a| a.m)
-    }
-
-    /// Number of samples currently delayed.
-    pub fn delayed(&self) -> u64 {
-        self.settled().ledger.delayed() as u64
-    }
-
-    /// Number of delayed samples dropped because the list was full.
-    pub fn dropped(&self) -> u64 {
-        self.settled().ledger.dropped()
-    }
-
-    /// Number of accepted samples, black ones included (the estimate's divisor).
-    pub fn accepted(&self) -> u64 {
-        self.settled().ledger.accepted()
+        self.settled().bound.adr_bound()
     }
 
     /// ADR's modes, ascending (empty after the switch).
     pub fn modes(&self) -> Vec<PajotMode> {
         self.settled()
+            .bound
             .adr
             .as_ref()
             .map_or_else(Vec::new, Adr::public_modes)
@@ -650,21 +715,13 @@ impl PajotHybrid {
 
     /// The 0-based index of the sample at which the pixel switched to ROT alone, if it did.
     pub fn switch_index(&self) -> Option<u64> {
-        self.settled().switch_index
+        self.settled().bound.switch_index
     }
+}
 
-    fn is_learning(&self) -> bool {
-        self.n < learn_count(self.learn)
-    }
-
-    fn settled(&self) -> Cow<'_, Self> {
-        if self.is_learning() {
-            let mut copy = self.clone();
-            copy.finish_learning(self.n.saturating_sub(1));
-            Cow::Owned(copy)
-        } else {
-            Cow::Borrowed(self)
-        }
+impl HybridBound {
+    fn adr_bound(&self) -> f64 {
+        self.adr.as_ref().map_or(self.adr_last, |a| a.m)
     }
 
     /// Lower edge of the kept list: ROT needs the samples above `m_ROT`, the estimate the
@@ -696,143 +753,93 @@ impl PajotHybrid {
         }
     }
 
-    fn finish_learning(&mut self, index: u64) {
-        let (values, logs) =
-            sorted_with_logs(std::mem::take(&mut self.learning), Some(&mut self.rot));
-        let changed_rot = self.rot.learn_end(&logs);
-        let changed_adr = self.adr.as_mut().is_some_and(|a| a.learn_end(&logs));
+    fn update(&mut self, index: u64, l: f64, kept: &[f64]) -> Step {
+        let (old_bound, old_floor) = (self.m, self.floor());
+        let changed_rot = self.rot.update(l, kept);
+        let changed_adr = self.adr.as_mut().is_some_and(|a| a.update(l));
         self.after_sample(index, changed_rot || changed_adr);
         let (bound, floor) = (self.m, self.floor());
-        for (&s, &l) in values.iter().zip(&logs) {
-            self.ledger.place(s, l, bound, floor);
+        Step {
+            settle: (bound != old_bound || floor != old_floor).then_some((bound, floor)),
+            place: Some((bound, floor)),
         }
+    }
+}
+
+impl BoundStrategy for HybridBound {
+    const OBSERVES_LEARNING: bool = true;
+
+    fn observe(&mut self, l: f64) {
+        self.rot.observe(l);
+    }
+
+    fn learn_end(&mut self, logs: &[f64], index: u64) -> (f64, f64) {
+        let changed_rot = self.rot.learn_end(logs);
+        let changed_adr = self.adr.as_mut().is_some_and(|a| a.learn_end(logs));
+        self.after_sample(index, changed_rot || changed_adr);
+        (self.m, self.floor())
     }
 
     #[inline(always)]
-    fn push_one(&mut self, s: f64) {
-        let index = self.n;
-        self.n += 1;
-        if self.n <= learn_count(self.learn) {
-            if s == 0.0 {
-                self.ledger.zero();
-            } else {
-                store(&mut self.learning, self.learn, s);
-            }
-            if self.n == learn_count(self.learn) {
-                self.finish_learning(index);
-            }
-            return;
-        }
-        if s == 0.0 {
-            self.ledger.zero();
-            return;
-        }
-        let l = s.ln();
+    fn step(&mut self, l: f64, index: u64, kept: &[f64]) -> Step {
         self.rot.observe(l);
         if self.adr.is_none() && l <= self.rot.m {
             // Switched: ROT alone, and l <= m_ROT <= m_h, so nothing moves and l need not be
             // kept. (Between m_ROT and m_h, l is accepted but is one of ROT's overlap points.)
-            self.ledger.accept(s);
-            return;
+            return Step {
+                settle: None,
+                place: None,
+            };
         }
-        self.update(index, s, l);
+        self.update(index, l, kept)
     }
 
-    fn update(&mut self, index: u64, s: f64, l: f64) {
-        let (old_bound, old_floor) = (self.m, self.floor());
-        let changed_rot = self.rot.update(l, self.ledger.kept());
-        let changed_adr = self.adr.as_mut().is_some_and(|a| a.update(l));
-        self.after_sample(index, changed_rot || changed_adr);
-        let (bound, floor) = (self.m, self.floor());
-        if bound != old_bound || floor != old_floor {
-            self.ledger.settle(bound, floor);
-        }
-        self.ledger.place(s, l, bound, floor);
-    }
-}
-
-impl fmt::Display for PajotHybrid {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "Pajot-hybrid(learn={},T={},delta={}",
-            self.learn, self.t, self.delta
-        )?;
-        fmt_cap(f, &self.ledger)?;
-        write!(f, ")")
-    }
-}
-
-impl Estimator for PajotHybrid {
-    fn push(&mut self, sample: f64) {
-        self.push_one(sample);
+    fn bound(&self) -> f64 {
+        self.m
     }
 
-    fn push_slice(&mut self, samples: &[f64]) {
-        for &s in samples {
-            self.push_one(s);
-        }
-    }
-
-    fn count(&self) -> u64 {
-        self.n
-    }
-
-    fn estimate(&self) -> Result<f64> {
-        if self.n == 0 {
-            return Err(super::empty(self));
-        }
-        Ok(self.settled().ledger.mean())
-    }
-
-    fn extras(&self) -> Extras {
-        let s = self.settled();
-        let mut x = common_extras(&s.ledger, s.m);
-        let (single, extended) = s.adr.as_ref().map_or((0, 0), Adr::mode_counts);
-        x.push(("m_rot", Extra::Float(s.rot.m)));
-        x.push((
-            "m_adr",
-            Extra::Float(s.adr.as_ref().map_or(s.adr_last, |a| a.m)),
-        ));
+    fn extras(&self, x: &mut Extras) {
+        let (single, extended) = self.adr.as_ref().map_or((0, 0), Adr::mode_counts);
+        x.push(("m_rot", Extra::Float(self.rot.m)));
+        x.push(("m_adr", Extra::Float(self.adr_bound())));
         x.push(("modes_single", Extra::Int(single)));
         x.push(("modes_extended", Extra::Int(extended)));
-        x.push(("switched", Extra::Bool(s.switch_index.is_some())));
-        if let Some(i) = s.switch_index {
+        x.push(("switched", Extra::Bool(self.switch_index.is_some())));
+        if let Some(i) = self.switch_index {
             x.push(("switch_index", Extra::Int(i)));
         }
-        x
     }
 
-    fn state_bytes(&self) -> usize {
-        size_of::<Self>()
-            + self.learning.capacity() * size_of::<f64>()
-            + self.ledger.heap_bytes()
-            + self.adr.as_ref().map_or(0, Adr::heap_bytes)
-    }
-
-    fn spec(&self) -> EstimatorSpec {
-        EstimatorSpec::PajotHybrid {
-            learn: self.learn,
-            t: self.t,
-            delta: self.delta,
-        }
+    fn heap_bytes(&self) -> usize {
+        self.adr.as_ref().map_or(0, Adr::heap_bytes)
     }
 
     fn reset(&mut self) {
-        self.n = 0;
-        self.learning.clear();
         self.rot = Rot::NEW;
         match &mut self.adr {
-            Some(a) => {
-                a.modes.clear();
-                a.m = f64::NEG_INFINITY;
-            }
+            Some(a) => clear_adr(a),
             None => self.adr = Some(Adr::NEW),
         }
         self.adr_last = f64::NEG_INFINITY;
         self.m = f64::NEG_INFINITY;
         self.streak = 0;
         self.switch_index = None;
-        self.ledger.clear();
+    }
+
+    fn describe(&self, learn: usize, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "Pajot-hybrid(learn={learn},T={},delta={}",
+            self.t, self.delta
+        )
+    }
+
+    fn spec(&self, learn: usize) -> EstimatorSpec {
+        PajotHybridSpec {
+            learn,
+            t: self.t,
+            delta: self.delta,
+        }
+        .into()
     }
 }
