@@ -14,7 +14,7 @@
 //!    to that resolution; it does not prove either correct beyond it (and cannot see tails
 //!    rarer than ~1/n).
 //!
-//! Run in release: `cargo test --release --test dist` (a few seconds on two cores).
+//! Run in release: `cargo test --release --test suite -- dist::` (a few seconds on two cores).
 
 use fireflies::Error;
 use fireflies::dist::{

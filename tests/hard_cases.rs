@@ -7,7 +7,7 @@ use fireflies::estimators::{
     Bank, Estimator, EstimatorSpec, Extra, GiniDiagnostic, Gmon, GmonB, Jung, Mean, Mon,
 };
 
-mod common;
+use crate::common;
 use common::{REL, S, assert_rel};
 
 fn run(spec: &str, xs: &[f64]) -> Box<dyn Estimator> {

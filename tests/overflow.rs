@@ -21,7 +21,7 @@ use proptest::prelude::*;
 use proptest::test_runner::Config;
 
 #[allow(dead_code)] // REL: this file states its own tolerances
-mod common;
+use crate::common;
 use common::{S, assert_rel};
 
 /// Every estimator name, at parameters that exercise the overflowing paths: an even number of

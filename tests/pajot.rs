@@ -2,7 +2,7 @@
 //! doc, properties checked against a literal (slow) re-reading of the spec, hard inputs, and the
 //! delayed fractions and state sizes on the presets.
 //!
-//! Run the statistical part with `cargo test --release --test pajot -- --nocapture` to see the
+//! Run the statistical part with `cargo test --release --test suite -- pajot:: --nocapture` to see the
 //! measured figures.
 
 use fireflies::dist::Preset;

@@ -199,7 +199,7 @@ fn figures_survive_a_csv_round_trip() {
 }
 
 /// Draws the plots of a real run next to its CSV:
-/// `FIREFLIES_RESULTS=reports/default/results.csv cargo test --test plots -- --ignored`.
+/// `FIREFLIES_RESULTS=reports/default/results.csv cargo test --test suite -- plots:: --ignored`.
 #[test]
 #[ignore = "needs FIREFLIES_RESULTS pointing at a results.csv"]
 fn render_results_csv() {

@@ -11,7 +11,7 @@ use fireflies::estimators::{
     GmonBSpec, GmonSpec, Jung, JungSpec, Mean, MeanSpec, Mon, MonSpec,
 };
 
-mod common;
+use crate::common;
 use common::{REL, S, assert_rel};
 
 fn parse(spec: &str) -> EstimatorSpec {
