@@ -268,11 +268,14 @@ fn unseen(
     )
 }
 
+/// Samples held at once by [`simulate`] (8 MB): its memory stays bounded for any `n`.
+const SIMULATED_SAMPLES: usize = 1 << 20;
+
 /// Per estimator, its relative errors on [`PAIR_TRIALS`] trials whose `k` (1 or 2) samples at
 /// random positions come from the law above `level` and the rest from the law. The trials are
-/// drawn first, one stream in trial order, then the estimators run on them in parallel (the
-/// largest checkpoint holds most of the work, so parallel checkpoints alone leave a core idle);
-/// the errors do not depend on the thread count.
+/// drawn in batches of at most [`SIMULATED_SAMPLES`] samples, one stream in trial order, and the
+/// estimators run on each batch in parallel (the largest checkpoint holds most of the work, so
+/// parallel checkpoints alone leave a core idle); the errors do not depend on the thread count.
 fn simulate(
     d: &Distribution,
     estimators: &[EstimatorSpec],
@@ -282,34 +285,89 @@ fn simulate(
     level: f64,
     seed: u64,
 ) -> Option<Vec<Vec<f64>>> {
+    let batch = (SIMULATED_SAMPLES / n).clamp(1, PAIR_TRIALS);
+    simulate_in_batches(d, estimators, build, n, k, level, seed, batch)
+}
+
+/// [`simulate`] with `batch` trials drawn at a time; the errors do not depend on `batch`.
+#[allow(clippy::too_many_arguments)]
+fn simulate_in_batches(
+    d: &Distribution,
+    estimators: &[EstimatorSpec],
+    build: BuildFn,
+    n: usize,
+    k: usize,
+    level: f64,
+    seed: u64,
+    batch: usize,
+) -> Option<Vec<Vec<f64>>> {
     let mu = d.dist.mean();
     let above = d.dist.above(level);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let mut samples = vec![0.0; n * PAIR_TRIALS];
-    for trial in samples.chunks_exact_mut(n) {
-        for s in trial.iter_mut() {
-            *s = d.dist.sample(&mut rng);
+    let mut samples = vec![0.0; n * batch];
+    let mut errors = vec![Vec::with_capacity(PAIR_TRIALS); estimators.len()];
+    let mut done = 0;
+    while done < PAIR_TRIALS {
+        let trials = batch.min(PAIR_TRIALS - done);
+        let drawn = &mut samples[..n * trials];
+        for trial in drawn.chunks_exact_mut(n) {
+            for s in trial.iter_mut() {
+                *s = d.dist.sample(&mut rng);
+            }
+            let first = rng.random_range(0..n);
+            if k == 2 {
+                let second = (first + rng.random_range(1..n)) % n;
+                trial[first] = above.sample(&mut rng);
+                trial[second] = above.sample(&mut rng);
+            } else {
+                trial[first] = above.sample(&mut rng);
+            }
         }
-        let first = rng.random_range(0..n);
-        if k == 2 {
-            let second = (first + rng.random_range(1..n)) % n;
-            trial[first] = above.sample(&mut rng);
-            trial[second] = above.sample(&mut rng);
-        } else {
-            trial[first] = above.sample(&mut rng);
-        }
-    }
-    estimators
-        .par_iter()
-        .map(|spec| {
-            samples
-                .chunks_exact(n)
-                .map(|trial| {
+        let drawn = &samples[..n * trials];
+        errors
+            .par_iter_mut()
+            .zip(estimators)
+            .try_for_each(|(errs, spec)| {
+                for trial in drawn.chunks_exact(n) {
                     let mut e = build(spec).ok()?;
                     e.push_slice(trial);
-                    Some(e.estimate().ok()? / mu - 1.0)
-                })
-                .collect::<Option<Vec<f64>>>()
-        })
-        .collect()
+                    errs.push(e.estimate().ok()? / mu - 1.0);
+                }
+                Some(())
+            })?;
+        done += trials;
+    }
+    Some(errors)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dist::Preset;
+
+    /// Memory is bounded by drawing the trials in batches (an `n` of a million would otherwise
+    /// hold 256 million samples); the batch size must not change a single error. Fails if a
+    /// batch restarts the stream, drops or repeats a trial, or reorders the errors.
+    #[test]
+    fn batches_do_not_change_the_errors() {
+        let d = Distribution {
+            label: "glossy".into(),
+            dist: Preset::Glossy.dist(),
+        };
+        let estimators: Vec<EstimatorSpec> = ["mean", "mon:M=5", "zirr", "pajot-rot:learn=8"]
+            .iter()
+            .map(|s| s.parse().unwrap())
+            .collect();
+        let build: BuildFn = |s| s.build();
+        for k in [1, 2] {
+            let whole = simulate_in_batches(&d, &estimators, build, 33, k, 20.0, 7, PAIR_TRIALS);
+            let whole = whole.unwrap();
+            assert_eq!(whole.len(), estimators.len());
+            assert!(whole.iter().all(|e| e.len() == PAIR_TRIALS));
+            for batch in [1, 7, 100] {
+                let parts = simulate_in_batches(&d, &estimators, build, 33, k, 20.0, 7, batch);
+                assert_eq!(parts.as_ref(), Some(&whole), "batch {batch}, k {k}");
+            }
+        }
+    }
 }
