@@ -6,9 +6,11 @@
 //! time, when the pixel's spread is known. Image mode ([`Jung::set_sigma_image`]) lets a
 //! renderer feed the running spread of all samples of the image (docs/estimators.md §4).
 //!
-//! Overflow: `σ_pixel` is docs/estimators.md §1's Welford literally, `+inf` once its squared deviations
-//! overflow (samples spread over more than about `1e154`), which selects `M = m_max`
-//! (`tests/hard_cases.rs` pins this). The sets' sums are rescaled before they overflow (see
+//! `σ_pixel` comes from blocks merged with Chan et al.'s rule ([`Welford::push_block`], the
+//! block form docs/estimators.md §1 allows), so no division per sample sits on a dependency
+//! chain; single pushes take Welford's update. Overflow: `σ_pixel` is `+inf` once its squared
+//! deviations overflow (samples spread over more than about `1e154`), which selects
+//! `M = m_max` (`tests/hard_cases.rs` pins this). The sets' sums are rescaled before they overflow (see
 //! [`Partition`]), so the estimate itself is finite for any finite samples.
 
 use super::mon::{Partition, median_sorted};
@@ -145,9 +147,7 @@ impl Estimator for Jung {
     }
 
     fn push_slice(&mut self, samples: &[f64]) {
-        for &s in samples {
-            self.spread.push(s);
-        }
+        self.spread.push_block(samples);
         for p in &mut self.partitions {
             p.push_slice(samples);
         }
