@@ -101,6 +101,21 @@ pub trait Estimator: Send + Sync + fmt::Display {
     /// Forgets every sample, keeping the parameters (lets a harness reuse allocations).
     fn reset(&mut self);
 
+    /// The number of sets of the one round-robin partition the estimator keeps (MoN, Gini,
+    /// G-MoN, G-MoN_b), so that a [`Bank`] holding several with the same M feeds that
+    /// partition once and hands it to each: an optional capability, `None` by default.
+    fn partition_sets(&self) -> Option<usize> {
+        None
+    }
+
+    /// [`Estimator::push_slice`] when `partition` (with [`Estimator::partition_sets`] sets)
+    /// has been fed this estimator's whole stream, `samples` included: the estimator adopts
+    /// it and updates the rest of its state. Same result as `push_slice(samples)`.
+    fn push_slice_sharing(&mut self, samples: &[f64], partition: &Partition) {
+        let _ = partition;
+        self.push_slice(samples);
+    }
+
     /// Whether the estimator reads the image's sample spread `σ_image` (Jung's image mode,
     /// docs/estimators.md §4): an optional capability, false by default.
     fn uses_image_sigma(&self) -> bool {

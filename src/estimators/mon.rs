@@ -180,6 +180,14 @@ impl Partition {
         out.sort_unstable_by(f64::total_cmp);
     }
 
+    /// Becomes a copy of `other` (a partition fed the same stream elsewhere, see
+    /// [`crate::estimators::Bank`]), without allocating when the set counts match.
+    pub fn copy_from(&mut self, other: &Partition) {
+        self.sums.copy_from(&other.sums);
+        self.cursor = other.cursor;
+        self.n = other.n;
+    }
+
     /// Forgets every sample.
     pub fn reset(&mut self) {
         self.sums.reset(self.sums.len());
@@ -338,6 +346,14 @@ macro_rules! partition_common {
 
         fn reset(&mut self) {
             self.part.reset();
+        }
+
+        fn partition_sets(&self) -> Option<usize> {
+            Some(self.part.sets())
+        }
+
+        fn push_slice_sharing(&mut self, _samples: &[f64], partition: &Partition) {
+            self.part.copy_from(partition);
         }
     };
 }
@@ -512,6 +528,15 @@ impl Estimator for GmonB {
 
     fn push_slice(&mut self, samples: &[f64]) {
         self.part.push_slice(samples);
+        self.total.add_all(samples.iter().copied());
+    }
+
+    fn partition_sets(&self) -> Option<usize> {
+        Some(self.part.sets())
+    }
+
+    fn push_slice_sharing(&mut self, samples: &[f64], partition: &Partition) {
+        self.part.copy_from(partition);
         self.total.add_all(samples.iter().copied());
     }
 

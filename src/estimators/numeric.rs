@@ -280,6 +280,12 @@ impl ScaledSums {
         self.sums[i].mean_of(scaled, count)
     }
 
+    /// Becomes a copy of `other`, reusing this allocation where it is large enough.
+    pub(crate) fn copy_from(&mut self, other: &ScaledSums) {
+        self.sums.clone_from(&other.sums);
+        self.scaled.clone_from(&other.scaled);
+    }
+
     /// Grows to `len` empty sums (allocating exactly what is needed).
     pub(crate) fn grow(&mut self, len: usize) {
         if self.sums.len() < len {
