@@ -61,10 +61,13 @@ impl Bank {
             .iter()
             .map(|&m| {
                 let m = m.filter(|&m| sets.iter().filter(|&&k| k == Some(m)).count() >= 2)?;
-                let at = shared.iter().position(|p| p.sets() == m).unwrap_or_else(|| {
-                    shared.push(Partition::new(m).expect("an estimator already keeps M sets"));
-                    shared.len() - 1
-                });
+                let at = shared
+                    .iter()
+                    .position(|p| p.sets() == m)
+                    .unwrap_or_else(|| {
+                        shared.push(Partition::new(m).expect("an estimator already keeps M sets"));
+                        shared.len() - 1
+                    });
                 Some(at)
             })
             .collect();
@@ -119,7 +122,11 @@ impl Bank {
             .iter()
             .map(|p| std::mem::size_of::<Partition>() + p.heap_bytes())
             .sum();
-        self.estimators.iter().map(|e| e.state_bytes()).sum::<usize>() + shared
+        self.estimators
+            .iter()
+            .map(|e| e.state_bytes())
+            .sum::<usize>()
+            + shared
     }
 
     /// Forgets every sample, keeping the estimators and their allocations.
@@ -151,7 +158,13 @@ mod tests {
         // of every length around M (the short ones bypass the sharing) give estimates, extras
         // and counts equal bit for bit to estimators fed alone; a copy that lagged a block,
         // skipped the cursor or the count would change the sets' means.
-        let texts = ["mon:M=3", "gini:M=3", "gmonb:M=3,threshold=0", "mon:M=5", "mean"];
+        let texts = [
+            "mon:M=3",
+            "gini:M=3",
+            "gmonb:M=3,threshold=0",
+            "mon:M=5",
+            "mean",
+        ];
         let specs: Vec<EstimatorSpec> = texts.iter().map(|s| s.parse().unwrap()).collect();
         let mut bank = Bank::new(&specs).unwrap();
         assert_eq!(bank.shared.len(), 1);
@@ -164,7 +177,10 @@ mod tests {
             bank.push_slice(block).unwrap();
             alone.iter_mut().for_each(|e| e.push_slice(block));
             for (b, a) in bank.estimators().iter().zip(&alone) {
-                assert_eq!(b.estimate().unwrap().to_bits(), a.estimate().unwrap().to_bits());
+                assert_eq!(
+                    b.estimate().unwrap().to_bits(),
+                    a.estimate().unwrap().to_bits()
+                );
                 assert_eq!(b.extras(), a.extras(), "{a}");
                 assert_eq!(b.count(), a.count());
             }
