@@ -2,7 +2,7 @@
 //! bounded variance; the cheapest firefly remedy renderers ship, and the baseline robust
 //! methods must beat.
 
-use super::numeric::ScaledSum;
+use super::mean::Mean;
 use super::rgb::per_channel;
 use super::{Estimator, EstimatorSpec, Key, Method, RgbEstimator, empty};
 use crate::error::{Error, Result};
@@ -29,13 +29,12 @@ impl Method for ClampSpec {
     }
 }
 
-/// Mean of `min(S, c)`.
+/// Mean of `min(S, c)`: the plain [`Mean`] of the clamped stream.
 #[derive(Debug, Clone)]
 pub struct Clamp {
     c: f64,
-    /// Rescaled before it overflows, so a clamp near `f64::MAX` stays finite.
-    sum: ScaledSum,
-    n: u64,
+    /// Its sum is rescaled before it overflows, so a clamp near `f64::MAX` stays finite.
+    clamped: Mean,
 }
 
 impl Clamp {
@@ -46,8 +45,7 @@ impl Clamp {
         }
         Ok(Clamp {
             c,
-            sum: ScaledSum::new(),
-            n: 0,
+            clamped: Mean::new(),
         })
     }
 
@@ -66,25 +64,23 @@ impl fmt::Display for Clamp {
 impl Estimator for Clamp {
     #[inline]
     fn push(&mut self, sample: f64) {
-        self.sum.add(sample.min(self.c));
-        self.n += 1;
+        self.clamped.push(sample.min(self.c));
     }
 
     fn push_slice(&mut self, samples: &[f64]) {
         let c = self.c;
-        self.sum.add_all(samples.iter().map(|&s| s.min(c)));
-        self.n += samples.len() as u64;
+        self.clamped.push_iter(samples.iter().map(|&s| s.min(c)));
     }
 
     fn count(&self) -> u64 {
-        self.n
+        self.clamped.count()
     }
 
     fn estimate(&self) -> Result<f64> {
-        if self.n == 0 {
+        if self.count() == 0 {
             return Err(empty(self));
         }
-        Ok(self.sum.mean(self.n))
+        self.clamped.estimate()
     }
 
     fn state_bytes(&self) -> usize {
@@ -96,7 +92,6 @@ impl Estimator for Clamp {
     }
 
     fn reset(&mut self) {
-        self.sum = ScaledSum::new();
-        self.n = 0;
+        self.clamped.reset();
     }
 }

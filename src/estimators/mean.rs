@@ -38,6 +38,13 @@ impl Mean {
     pub fn new() -> Self {
         Self::default()
     }
+
+    /// Adds samples given as an iterator (what [`super::Clamp`] feeds after clamping).
+    #[inline]
+    pub(super) fn push_iter(&mut self, samples: impl ExactSizeIterator<Item = f64> + Clone) {
+        self.n += samples.len() as u64;
+        self.sum.add_all(samples);
+    }
 }
 
 impl fmt::Display for Mean {
@@ -54,8 +61,7 @@ impl Estimator for Mean {
     }
 
     fn push_slice(&mut self, samples: &[f64]) {
-        self.sum.add_all(samples.iter().copied());
-        self.n += samples.len() as u64;
+        self.push_iter(samples.iter().copied());
     }
 
     fn count(&self) -> u64 {

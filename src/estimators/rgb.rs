@@ -61,7 +61,6 @@ use super::numeric::{ScaledSum, ScaledSums};
 use super::zirr::Splat;
 use super::{BoundStrategy, Estimator, EstimatorSpec, Pajot, Zirr, empty};
 use crate::error::{Error, Result};
-use std::any::Any;
 use std::fmt;
 
 /// Rec. 709 luminance weights of red, green and blue.
@@ -113,8 +112,11 @@ pub trait RgbEstimator: Send + Sync + fmt::Display {
     /// The scalar spec this estimator was built from.
     fn spec(&self) -> EstimatorSpec;
 
-    /// The concrete estimator, so that Zirr can read its neighbours' cascades.
-    fn as_any(&self) -> &dyn Any;
+    /// The luminance cascade of a Zirr pixel, which its neighbours read in
+    /// [`RgbEstimator::block_estimate`]: an optional capability, `None` by default.
+    fn luminance_cascade(&self) -> Option<&Zirr> {
+        None
+    }
 }
 
 /// Builds the RGB estimator for a spec (every method), checking every parameter as
@@ -231,10 +233,6 @@ impl<E: Estimator + 'static> RgbEstimator for PerChannel<E> {
     fn spec(&self) -> EstimatorSpec {
         self.ch[0].spec()
     }
-
-    fn as_any(&self) -> &dyn Any {
-        self
-    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -334,8 +332,9 @@ impl RgbEstimator for ZirrRgb {
     }
 
     /// The 3×3 estimate ([Z] §5.3.1): index 4 is taken to be this pixel whatever the block
-    /// holds there; every other present pixel must be the same kind of RGB estimator (an error
-    /// names its index otherwise) and, as in the scalar method, have the same parameters.
+    /// holds there; every other present pixel must be a Zirr pixel (one with a
+    /// [`RgbEstimator::luminance_cascade`]; an error names its index otherwise) and, as in the
+    /// scalar method, have the same parameters.
     ///
     /// [Z]: super::zirr
     fn block_estimate(&self, block: &[Option<&dyn RgbEstimator>; 9]) -> Result<[f64; 3]> {
@@ -346,7 +345,7 @@ impl RgbEstimator for ZirrRgb {
                 continue;
             }
             let Some(px) = px else { continue };
-            let Some(z) = px.as_any().downcast_ref::<Self>() else {
+            let Some(z) = px.luminance_cascade() else {
                 return Err(Error::param(
                     "block index",
                     k,
@@ -356,7 +355,7 @@ impl RgbEstimator for ZirrRgb {
                     ),
                 ));
             };
-            *slot = Some(&z.lum);
+            *slot = Some(z);
         }
         Ok(self.compose(&Zirr::block_weights(&lum)?))
     }
@@ -369,8 +368,8 @@ impl RgbEstimator for ZirrRgb {
         self.lum.spec()
     }
 
-    fn as_any(&self) -> &dyn Any {
-        self
+    fn luminance_cascade(&self) -> Option<&Zirr> {
+        Some(&self.lum)
     }
 }
 
@@ -519,9 +518,5 @@ impl<B: BoundStrategy> RgbEstimator for PajotRgb<B> {
 
     fn spec(&self) -> EstimatorSpec {
         self.lum.spec()
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }

@@ -218,7 +218,15 @@ impl Adr {
                 return false;
             }
         }
-        let Some((a, b)) = self.overlapped(l, i) else {
+        let overlap = self.overlapped(l, i);
+        self.merge(l, i, overlap)
+    }
+
+    /// The last step of [`Adr::update`] once the search has placed `l` before mode `i` and
+    /// found the modes `a..=b` it overlaps (if any): a new point mode, or one mode spanning `l`
+    /// and every mode meeting that span. Returns whether `m` changed.
+    fn merge(&mut self, l: f64, i: usize, overlap: Option<(usize, usize)>) -> bool {
+        let Some((mut a, mut b)) = overlap else {
             self.modes.insert(
                 i,
                 PajotMode {
@@ -229,8 +237,6 @@ impl Adr {
             );
             return false;
         };
-        // Span l and the overlapped modes, then absorb every mode meeting the span.
-        let (mut a, mut b) = (a, b);
         let mut lo = l.min(self.modes[a].lo);
         let mut hi = l.max(self.modes[b].hi);
         while a > 0 && self.modes[a - 1].hi >= lo {

@@ -40,34 +40,9 @@ impl Adr {
                 return false;
             }
         }
-        let Some((a, b)) = self.overlapped_ref(l, i) else {
-            self.modes.insert(
-                i,
-                PajotMode {
-                    lo: l,
-                    hi: l,
-                    count: 1,
-                },
-            );
-            return false;
-        };
-        // Span l and the overlapped modes, then absorb every mode meeting the span.
-        let (mut a, mut b) = (a, b);
-        let mut lo = l.min(self.modes[a].lo);
-        let mut hi = l.max(self.modes[b].hi);
-        while a > 0 && self.modes[a - 1].hi >= lo {
-            a -= 1;
-            lo = lo.min(self.modes[a].lo);
-        }
-        while b + 1 < self.modes.len() && self.modes[b + 1].lo <= hi {
-            b += 1;
-            hi = hi.max(self.modes[b].hi);
-        }
-        let count = self.modes[a..=b].iter().map(|m| m.count).sum::<u64>() + 1;
-        self.modes.splice(a..=b, [PajotMode { lo, hi, count }]);
-        let old = self.m;
-        self.m = self.m.max(hi);
-        self.m != old
+        // The merge is shared: this oracle checks the searches.
+        let overlap = self.overlapped_ref(l, i);
+        self.merge(l, i, overlap)
     }
 
     /// [`Adr::overlapped`] by materialising every point: the literal reading, kept as the
