@@ -358,10 +358,12 @@ mod tests {
             let d = p.dist();
             let mut a = Xoshiro256PlusPlus::seed_from_u64(7);
             let mut b = a.clone();
-            let mut block = [0.0; 64];
+            let mut block = vec![0.0; 1000];
             d.fill(&mut a, &mut block);
-            let one: Vec<f64> = (0..64).map(|_| d.sample(&mut b)).collect();
-            assert_eq!(block.to_vec(), one, "{p}");
+            let one: Vec<f64> = (0..1000).map(|_| d.sample(&mut b)).collect();
+            let bits = |xs: &[f64]| xs.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&block), bits(&one), "{p}");
+            assert_eq!(a, b, "{p}: the same randomness consumed");
         }
     }
 
