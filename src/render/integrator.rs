@@ -201,13 +201,14 @@ fn trace<const FEATURES: bool>(
         let u_light = rng.next_2d();
         if bsdf.has_smooth_lobe() {
             let mut visible = false;
-            if let Some(ls) = lights.sample(hit.p, u_choice, u_light) {
+            if let Some(mut ls) = lights.sample(hit.p, u_choice, u_light) {
                 let wo = frame.to_local(ls.wi);
                 let (f, bsdf_pdf) = bsdf.eval_pdf(&at, wi, wo);
                 if f.max_element() > 0.0 {
                     let (shadow, dist) = shadow_ray(&hit, ls.wi, ls.dist);
                     if !world.bvh.occluded(&shadow, 0.0, dist) {
                         visible = true;
+                        lights.resolve(&mut ls);
                         let w = if ls.delta {
                             1.0
                         } else {

@@ -63,6 +63,7 @@ impl AreaLight {
             radiance: self.radiance,
             pdf: s.pdf,
             delta: false,
+            pending: None,
         })
     }
 }

@@ -33,6 +33,7 @@ impl Emitter for Constant {
             radiance: self.radiance,
             pdf: UNIFORM_SPHERE_PDF,
             delta: false,
+            pending: None,
         })
     }
 

@@ -14,6 +14,10 @@ use std::fmt::Debug;
 use std::sync::Arc;
 
 /// A next-event sample: where the light comes from and what it brings.
+///
+/// An emitter may leave `radiance` and `pdf` for later (`pending`): then they are read only
+/// once [`Lights::resolve`] is called, after the shadow ray passed. An environment map does so:
+/// reading a drawn texel misses the cache, and in an interior most shadow rays are blocked.
 #[derive(Debug, Clone, Copy)]
 pub struct LightSample {
     /// Unit direction from the shading point towards the emitter.
@@ -27,6 +31,23 @@ pub struct LightSample {
     pub pdf: f32,
     /// A point light: no other strategy can sample it.
     pub delta: bool,
+    /// Set when `radiance` and `pdf` are not read yet.
+    pub pending: Option<Pending>,
+}
+
+/// What an emitter needs to finish a draw it left pending: its own key, and (set by
+/// [`Lights::sample`]) which emitter it is.
+#[derive(Debug, Clone, Copy)]
+pub struct Pending {
+    key: [u32; 3],
+    emitter: u32,
+}
+
+impl Pending {
+    /// An emitter's key for [`Emitter::resolve`].
+    pub fn new(key: [u32; 3]) -> Pending {
+        Pending { key, emitter: 0 }
+    }
 }
 
 /// An emitter not attached to a shape.
@@ -40,6 +61,11 @@ pub trait Emitter: Debug + Send + Sync {
         false
     }
 
+    /// The `(radiance, pdf)` of a draw this emitter returned with `pending` set to `key`
+    /// (never called for an emitter that sets none).
+    fn resolve(&self, _key: [u32; 3]) -> (Rgb, f32) {
+        (Rgb::ZERO, 0.0)
+    }
     /// Radiance arriving along a ray that left the scene in direction `d`, and the density
     /// with which [`Emitter::sample`] returns that direction.
     fn eval_pdf_escaped(&self, _d: Vec3) -> (Rgb, f32) {
@@ -130,11 +156,26 @@ impl Lights {
             Some(light) => light.sample(from, u)?,
             None => self.others[i - self.area.len()].sample(from, u)?,
         };
+        if let Some(p) = &mut s.pending {
+            p.emitter = (i - self.area.len()) as u32;
+            return Some(s);
+        }
         if !s.delta {
             s.pdf *= self.choice_pdf();
         } else {
             s.pdf = self.choice_pdf();
         }
         Some(s)
+    }
+
+    /// Reads the radiance and density of a draw of [`Lights::sample`] that an emitter left
+    /// pending (a no-op otherwise).
+    #[inline]
+    pub fn resolve(&self, s: &mut LightSample) {
+        if let Some(p) = s.pending.take() {
+            let (radiance, pdf) = self.others[p.emitter as usize].resolve(p.key);
+            s.radiance = radiance;
+            s.pdf = pdf * self.choice_pdf();
+        }
     }
 }

@@ -58,6 +58,7 @@ impl Emitter for PointLight {
             radiance: self.intensity / d2,
             pdf: 1.0,
             delta: true,
+            pending: None,
         })
     }
 }
