@@ -6,7 +6,8 @@
 //! [`MAX_LEAF`]) are contiguous; the collapse then opens, in each 4-wide node, the binary
 //! child of largest area until four children remain. A child reference is an interior node's
 //! index or a leaf's primitive range ([`Child`]). Closest-hit traversal visits the children it
-//! hits nearest first; occlusion rays stop at the first hit.
+//! hits nearest first; occlusion rays stop at the first hit. A leaf of two to four triangles
+//! is also kept as a [`TrianglePacket`] and tested in one go.
 //!
 //! The slab test picks each axis' near and far plane by the sign bit of the direction, so a
 //! zero (or negative zero) component gives an infinite slab of the right sign; `0·∞ = NaN`
@@ -15,6 +16,7 @@
 //! by `1 + 2γ₃` (Ize 2013) so rounding cannot cull a box whose primitive the watertight
 //! triangle test would hit.
 
+use super::shapes::packet::{PacketHit, TrianglePacket};
 use super::shapes::{Hit, Primitive, RawHit, Ray, RayPre};
 use arrayvec::ArrayVec;
 use glam::{Vec3, Vec4};
@@ -50,22 +52,29 @@ struct Node {
     count: u32,
 }
 
-/// A child reference of a 4-wide node: an interior node's index, or (top bit set) a leaf's
-/// first primitive shifted left by 3 and its count in the low 3 bits. [`Child::EMPTY`] fills
-/// unused slots (whose boxes are empty, so no ray reaches them).
+/// A child reference of a 4-wide node: an interior node's index, or (top bit set) a leaf: with
+/// the next bit set the index of its [`Packet`], else its first primitive shifted left by 3
+/// and its count in the low 3 bits. [`Child::EMPTY`] fills unused slots (whose boxes are
+/// empty, so no ray reaches them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Child(u32);
 
 impl Child {
     const LEAF: u32 = 1 << 31;
+    const PACKET: u32 = 1 << 30;
     const EMPTY: Child = Child(u32::MAX);
 
     fn leaf(first: usize, count: usize) -> Child {
         assert!(
-            first < 1 << 28 && (1..=MAX_LEAF).contains(&count),
-            "BVH: more than 2^28 primitives"
+            first < 1 << 27 && (1..=MAX_LEAF).contains(&count),
+            "BVH: more than 2^27 primitives"
         );
         Child(Self::LEAF | (first as u32) << 3 | count as u32)
+    }
+
+    fn packet(index: usize) -> Child {
+        assert!(index < 1 << 30, "BVH: more than 2^30 packets");
+        Child(Self::LEAF | Self::PACKET | index as u32)
     }
 
     #[inline(always)]
@@ -73,7 +82,13 @@ impl Child {
         self.0 & Self::LEAF != 0
     }
 
-    /// A leaf's primitive range.
+    /// A leaf's [`Packet`] index, if it has one.
+    #[inline(always)]
+    fn packet_index(self) -> Option<usize> {
+        (self.0 & Self::PACKET != 0).then_some((self.0 & !(Self::LEAF | Self::PACKET)) as usize)
+    }
+
+    /// A leaf's primitive range (of a leaf without a packet).
     #[inline(always)]
     fn range(self) -> std::ops::Range<usize> {
         let first = ((self.0 & !Self::LEAF) >> 3) as usize;
@@ -92,11 +107,21 @@ struct Node4 {
 
 const _: () = assert!(std::mem::size_of::<Node4>() == 128);
 
+/// A leaf of two to four triangles: their vertices lane by lane, and where they are in the
+/// primitive array (for the hit record, and for the scalar test when the packet is unsure).
+#[derive(Debug, Clone, Copy)]
+struct Packet {
+    triangles: TrianglePacket,
+    first: u32,
+    count: u32,
+}
+
 /// The acceleration structure: 4-wide nodes (the root first) over a flat, reordered
 /// primitive array.
 #[derive(Debug, Clone, Default)]
 pub struct Bvh {
     nodes: Vec<Node4>,
+    packets: Vec<Packet>,
     /// Set when everything is one leaf (then `nodes` is empty).
     root_leaf: Option<Child>,
     bounds: Option<(Vec3, Vec3)>,
@@ -182,11 +207,35 @@ impl Trav {
             let near = (n.planes[self.near[a]] - self.o[a]) * self.inv[a];
             let far = (n.planes[self.far[a]] - self.o[a]) * self.inv[a];
             // A NaN lane (0·∞: the origin on a plane parallel to the ray) constrains nothing.
-            t_near = Vec4::select(near.cmpgt(t_near), near, t_near);
-            t_far = Vec4::select(far.cmplt(t_far), far, t_far);
+            t_near = max_or_keep(near, t_near);
+            t_far = min_or_keep(far, t_far);
         }
         let t_far = (t_far * Vec4::splat(FAR_SCALE)).min(Vec4::splat(tmax));
         (t_near, t_near.cmple(t_far).bitmask())
+    }
+}
+
+/// Per lane `x` where `x > keep`, else `keep` (also where `x` is NaN).
+///
+/// On x86-64 that is SSE's `maxps(x, keep)`, one instruction (it returns its second operand
+/// when either is NaN, and for equal values); elsewhere (NEON's max propagates NaN) a compare
+/// and a select.
+#[inline(always)]
+fn max_or_keep(x: Vec4, keep: Vec4) -> Vec4 {
+    if cfg!(target_arch = "x86_64") {
+        x.max(keep)
+    } else {
+        Vec4::select(x.cmpgt(keep), x, keep)
+    }
+}
+
+/// Per lane `x` where `x < keep`, else `keep` (also where `x` is NaN); see [`max_or_keep`].
+#[inline(always)]
+fn min_or_keep(x: Vec4, keep: Vec4) -> Vec4 {
+    if cfg!(target_arch = "x86_64") {
+        x.min(keep)
+    } else {
+        Vec4::select(x.cmplt(keep), x, keep)
     }
 }
 
@@ -212,7 +261,7 @@ impl Bvh {
         let mut binary = Vec::with_capacity(2 * prims.len() / MAX_LEAF + 1);
         build_node(&mut binary, &mut items, 0, 0);
         let mut slots: Vec<Option<Primitive>> = prims.into_iter().map(Some).collect();
-        let prims = items
+        let prims: Vec<Primitive> = items
             .iter()
             .map(|it| {
                 slots[it.index as usize]
@@ -223,14 +272,25 @@ impl Bvh {
         let root = &binary[0];
         let bounds = Some((root.bounds[0], root.bounds[1]));
         let mut nodes = Vec::with_capacity(binary.len() / 2 + 1);
-        let root_leaf = if root.count > 0 {
+        let mut root_leaf = if root.count > 0 {
             Some(Child::leaf(root.offset as usize, root.count as usize))
         } else {
             collapse(&binary, 0, &mut nodes);
             None
         };
+        let mut packets = Vec::new();
+        for child in nodes
+            .iter_mut()
+            .flat_map(|n| n.child.iter_mut())
+            .chain(root_leaf.iter_mut())
+        {
+            if *child != Child::EMPTY && child.is_leaf() {
+                *child = pack(*child, &prims, &mut packets);
+            }
+        }
         Bvh {
             nodes,
+            packets,
             root_leaf,
             bounds,
             prims,
@@ -281,7 +341,22 @@ impl Bvh {
         t_best: &mut f32,
         best: &mut Option<(usize, RawHit)>,
     ) -> bool {
-        let range = leaf.range();
+        let range = match leaf.packet_index() {
+            None => leaf.range(),
+            Some(k) => {
+                let packet = &self.packets[k];
+                let first = packet.first as usize;
+                match packet.triangles.intersect::<ANY>(pre, tmin, *t_best) {
+                    PacketHit::Miss => return false,
+                    PacketHit::Hit(lane, h) => {
+                        *t_best = h.t;
+                        *best = Some((first + lane, h));
+                        return true;
+                    }
+                    PacketHit::Unsure => first..first + packet.count as usize,
+                }
+            }
+        };
         let first = range.start;
         let mut any = false;
         for (i, p) in self.prims[range].iter().enumerate() {
@@ -372,6 +447,28 @@ impl Bvh {
             }
         }
     }
+}
+
+/// `leaf` itself, or its packet (appended to `packets`) when it holds two or more triangles and
+/// nothing else.
+fn pack(leaf: Child, prims: &[Primitive], packets: &mut Vec<Packet>) -> Child {
+    let range = leaf.range();
+    let triangles: ArrayVec<[Vec3; 3], MAX_LEAF> = prims[range.clone()]
+        .iter()
+        .map_while(|p| match p {
+            Primitive::Triangle { p, .. } => Some(*p),
+            _ => None,
+        })
+        .collect();
+    if triangles.len() < 2 || triangles.len() < range.len() {
+        return leaf;
+    }
+    packets.push(Packet {
+        triangles: TrianglePacket::new(&triangles),
+        first: range.start as u32,
+        count: range.len() as u32,
+    });
+    Child::packet(packets.len() - 1)
 }
 
 /// Appends the 4-wide node of the binary interior node `b` (and, after it, its subtrees);

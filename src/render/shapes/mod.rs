@@ -16,6 +16,7 @@ pub mod disk;
 pub mod mesh;
 pub mod obj;
 pub mod obj_file;
+pub mod packet;
 pub mod rectangle;
 pub mod sphere;
 
