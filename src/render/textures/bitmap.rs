@@ -79,7 +79,7 @@ pub struct Bitmap {
     width: usize,
     height: usize,
     channels: usize,
-    data: Vec<f32>,
+    data: Texels,
     filter: Filter,
     wrap: Wrap,
     /// Rows of the affine part of `to_uv`: `p.x = m[0]·u + m[1]·v + m[2]`, `p.y = m[3]·u + …`.
@@ -129,7 +129,7 @@ impl Bitmap {
             width: image.width,
             height: image.height,
             channels: image.channels,
-            data: image.data,
+            data: Texels::new(image.data),
             filter,
             wrap,
             to_uv: [r0.x, r0.y, r0.z, r1.x, r1.y, r1.z],
@@ -251,10 +251,11 @@ impl Bitmap {
 
     fn texel(&self, x: usize, y: usize) -> [f32; 3] {
         let i = (y * self.width + x) * self.channels;
+        let d = &self.data;
         if self.channels == 1 {
-            [self.data[i], 0.0, 0.0]
+            [d.get(i), 0.0, 0.0]
         } else {
-            [self.data[i], self.data[i + 1], self.data[i + 2]]
+            [d.get(i), d.get(i + 1), d.get(i + 2)]
         }
     }
 
@@ -273,6 +274,64 @@ impl Bitmap {
             }
         };
         j as usize
+    }
+}
+
+/// Texel values, channel by channel in storage order.
+#[derive(Clone)]
+enum Texels {
+    Float(Vec<f32>),
+    /// An image with at most 256 distinct values (an 8-bit image, whose decoded values are a
+    /// function of the byte): one byte per value, indexing `values`. The same `f32`s, a quarter
+    /// of the memory: the living room's 2048x910 wood texture drops from 22 MB to 5.6 MB, and a
+    /// lookup's four texels miss the cache less often.
+    Palette {
+        index: Vec<u8>,
+        values: Box<[f32; 256]>,
+    },
+}
+
+impl Texels {
+    /// A palette when `data` has at most 256 distinct values (bit patterns), else the floats.
+    fn new(data: Vec<f32>) -> Texels {
+        /// Open-addressing slots (a power of two, four times the largest palette).
+        const SLOTS: usize = 1024;
+        let mut keys = [0u32; SLOTS];
+        // 0: empty; else the palette index + 1.
+        let mut slots = [0u16; SLOTS];
+        let mut values = Box::new([0.0f32; 256]);
+        let mut len = 0usize;
+        let mut index = Vec::with_capacity(data.len());
+        for &v in &data {
+            let bits = v.to_bits();
+            let mut h = (bits.wrapping_mul(0x9E37_79B1) >> 22) as usize;
+            let k = loop {
+                match slots[h] {
+                    0 => {
+                        if len == values.len() {
+                            return Texels::Float(data);
+                        }
+                        values[len] = v;
+                        len += 1;
+                        keys[h] = bits;
+                        slots[h] = len as u16;
+                        break len - 1;
+                    }
+                    s if keys[h] == bits => break usize::from(s) - 1,
+                    _ => h = (h + 1) % SLOTS,
+                }
+            };
+            index.push(k as u8);
+        }
+        Texels::Palette { index, values }
+    }
+
+    #[inline(always)]
+    fn get(&self, i: usize) -> f32 {
+        match self {
+            Texels::Float(data) => data[i],
+            Texels::Palette { index, values } => values[usize::from(index[i])],
+        }
     }
 }
 
@@ -420,6 +479,47 @@ mod tests {
             alpha_dropped: false,
         };
         Bitmap::from_data("test", image, filter, wrap, Mat3::IDENTITY)
+    }
+
+    /// The palette keeps every value bit for bit (colliding hashes, `-0` beside `0`, the
+    /// 256th value) and gives up at the 257th; the two storages give identical lookups.
+    #[test]
+    fn palette_is_exact_and_only_for_256_values() {
+        let mut values: Vec<f32> = (0..255).map(|k| (k as f32 / 255.0).powf(2.2)).collect();
+        values.push(-0.0);
+        let data: Vec<f32> = (0..3 * 64 * 32).map(|i| values[(i * 37) % 256]).collect();
+        let palette = Texels::new(data.clone());
+        assert!(matches!(palette, Texels::Palette { .. }));
+        for (i, v) in data.iter().enumerate() {
+            assert_eq!(palette.get(i).to_bits(), v.to_bits(), "value {i}");
+        }
+        let mut more = data.clone();
+        more.push(0.5_f32.next_up());
+        assert!(matches!(Texels::new(more), Texels::Float(_)));
+
+        let image = |data: Vec<f32>| TextureData {
+            width: 64,
+            height: 32,
+            channels: 3,
+            data,
+            alpha_dropped: false,
+        };
+        let a = Bitmap::from_data(
+            "a",
+            image(data.clone()),
+            Filter::Bilinear,
+            Wrap::Repeat,
+            Mat3::IDENTITY,
+        );
+        let mut b = a.clone();
+        b.data = Texels::Float(data);
+        for k in 0..1000 {
+            let uv = Vec2::new(k as f32 * 0.013 - 3.0, k as f32 * 0.0071);
+            assert_eq!(
+                a.eval(uv).to_array().map(f32::to_bits),
+                b.eval(uv).to_array().map(f32::to_bits)
+            );
+        }
     }
 
     #[test]
