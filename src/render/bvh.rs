@@ -414,6 +414,11 @@ impl Bvh {
                         }
                         continue;
                     }
+                    if mask & (mask - 1) == 0 {
+                        // One child hit (the common case deep in the tree): nothing to order.
+                        next = n.child[mask.trailing_zeros() as usize];
+                        continue;
+                    }
                     // Nearest first: sort the (at most four) hits by entry distance, stack all
                     // but the nearest farthest-first.
                     let mut hits: ArrayVec<(f32, Child), 4> = ArrayVec::new();
