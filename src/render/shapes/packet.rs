@@ -84,8 +84,8 @@ impl TrianglePacket {
         let (saz, sbz, scz) = (sz * az, sz * bz, sz * cz);
         let big_t = u * saz + v * sbz + w * scz;
         let t = big_t / det;
-        // `x − x` is 0 exactly for finite `x` (NaN for ±∞ and NaN).
-        let finite = (big_t - big_t).cmpeq(zero);
+        // False for ±∞ and NaN.
+        let finite = big_t.abs().cmplt(Vec4::INFINITY);
         let reach = saz.abs().max(sbz.abs()).max(scz.abs());
         let far_off = reach.cmpgt(Vec4::splat(REFINE_SPAN) * t.abs());
         let doubt = Vec4::splat(8.0 * f32::EPSILON) * reach;
