@@ -145,8 +145,9 @@ impl fmt::Debug for EnvMap {
 ///
 /// Why not the texel grid and a density table: on a 2048x1024 map a read-out then touched
 /// three scattered lines (density, two texel rows), and sampling and reading the map took a
-/// quarter of the living room's render time. A cell repeats its four corners (64 bytes per
-/// cell, 2.7x the texels' memory).
+/// quarter of the living room's render time. A cell repeats its four corners: 64 bytes per
+/// cell, 134 MB for a 2048x1024 map (plus 16 MB of alias buckets), where the texels, densities
+/// and buckets took 48 MB.
 #[derive(Debug, Clone, Copy)]
 #[repr(C, align(64))]
 struct Cell {

@@ -17,7 +17,7 @@ use std::sync::Arc;
 ///
 /// An emitter may leave `radiance` and `pdf` for later (`pending`): then they are read only
 /// once [`Lights::resolve`] is called, after the shadow ray passed. An environment map does so:
-/// reading a drawn texel misses the cache, and in an interior most shadow rays are blocked.
+/// reading a drawn texel misses the cache, and a blocked shadow ray then never pays for it.
 #[derive(Debug, Clone, Copy)]
 pub struct LightSample {
     /// Unit direction from the shading point towards the emitter.
