@@ -113,7 +113,6 @@ const _: () = assert!(std::mem::size_of::<Node4>() == 128);
 struct Packet {
     triangles: TrianglePacket,
     first: u32,
-    count: u32,
 }
 
 /// The acceleration structure: 4-wide nodes (the root first) over a flat, reordered
@@ -353,7 +352,7 @@ impl Bvh {
                         *best = Some((first + lane, h));
                         return true;
                     }
-                    PacketHit::Unsure => first..first + packet.count as usize,
+                    PacketHit::Unsure => first..first + packet.triangles.count(),
                 }
             }
         };
@@ -471,7 +470,6 @@ fn pack(leaf: Child, prims: &[Primitive], packets: &mut Vec<Packet>) -> Child {
     packets.push(Packet {
         triangles: TrianglePacket::new(&triangles),
         first: range.start as u32,
-        count: range.len() as u32,
     });
     Child::packet(packets.len() - 1)
 }

@@ -201,20 +201,20 @@ fn trace<const FEATURES: bool>(
         let u_light = rng.next_2d();
         if bsdf.has_smooth_lobe() {
             let mut visible = false;
-            if let Some(mut ls) = lights.sample(hit.p, u_choice, u_light) {
+            if let Some(ls) = lights.sample(hit.p, u_choice, u_light) {
                 let wo = frame.to_local(ls.wi);
                 let (f, bsdf_pdf) = bsdf.eval_pdf(&at, wi, wo);
                 if f.max_element() > 0.0 {
                     let (shadow, dist) = shadow_ray(&hit, ls.wi, ls.dist);
                     if !world.bvh.occluded(&shadow, 0.0, dist) {
                         visible = true;
-                        lights.resolve(&mut ls);
+                        let (radiance, light_pdf) = lights.resolve(&ls);
                         let w = if ls.delta {
                             1.0
                         } else {
-                            power_heuristic(ls.pdf, bsdf_pdf)
+                            power_heuristic(light_pdf, bsdf_pdf)
                         };
-                        result += beta * f * ls.radiance * (w / ls.pdf);
+                        result += beta * f * radiance * (w / light_pdf);
                     }
                 } else if FEATURES && awaiting_visibility {
                     // The surface itself hides an emitter behind it unless light passes.

@@ -57,13 +57,6 @@ impl AreaLight {
         if s.n.dot(wi) >= 0.0 {
             return None; // the back of the emitter
         }
-        Some(LightSample {
-            wi,
-            dist,
-            radiance: self.radiance,
-            pdf: s.pdf,
-            delta: false,
-            pending: None,
-        })
+        Some(LightSample::new(wi, dist, self.radiance, s.pdf, false))
     }
 }

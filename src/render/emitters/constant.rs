@@ -27,14 +27,13 @@ pub fn load(p: &mut Params) -> Result<Arc<dyn Emitter>> {
 
 impl Emitter for Constant {
     fn sample(&self, _from: Vec3, u: Vec2) -> Option<LightSample> {
-        Some(LightSample {
-            wi: square_to_uniform_sphere(u),
-            dist: f32::INFINITY,
-            radiance: self.radiance,
-            pdf: UNIFORM_SPHERE_PDF,
-            delta: false,
-            pending: None,
-        })
+        Some(LightSample::new(
+            square_to_uniform_sphere(u),
+            f32::INFINITY,
+            self.radiance,
+            UNIFORM_SPHERE_PDF,
+            false,
+        ))
     }
 
     fn is_infinite(&self) -> bool {

@@ -67,7 +67,7 @@
 //! `selection · pdf(d)` ([`EnvMap::eval_pdf`] gives both at once), and 1 after a delta lobe.
 //! Camera rays that escape see [`EnvMap::eval`] unweighted.
 
-use super::{Emitter, LightSample, Pending};
+use super::{Emitter, LightSample};
 use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::image::read::read_texture;
@@ -217,24 +217,10 @@ impl Emitter for EnvMap {
     fn sample(&self, _from: Vec3, u: Vec2) -> Option<LightSample> {
         if self.rigid && self.has_mass {
             let (wi, key) = self.sample_direction(u);
-            return Some(LightSample {
-                wi,
-                dist: f32::INFINITY,
-                radiance: Rgb::ZERO,
-                pdf: 0.0,
-                delta: false,
-                pending: Some(Pending::new(key)),
-            });
+            return Some(LightSample::deferred(wi, key));
         }
         let (wi, radiance, pdf) = EnvMap::sample(self, u)?;
-        Some(LightSample {
-            wi,
-            dist: f32::INFINITY,
-            radiance,
-            pdf,
-            delta: false,
-            pending: None,
-        })
+        Some(LightSample::new(wi, f32::INFINITY, radiance, pdf, false))
     }
 
     fn resolve(&self, key: [u32; 3]) -> (Rgb, f32) {
@@ -411,12 +397,12 @@ impl EnvMap {
         let v = self.to_local * d;
         if self.rigid {
             let (u, t) = self.texel_coords(v);
-            return self.cells[self.cell_index(u, t)].pdf;
+            return self.locate(u, t).0.pdf;
         }
         let len2 = v.length_squared();
         let len = len2.sqrt();
         let (u, t) = self.texel_coords(v / len);
-        let table = self.cells[self.cell_index(u, t)].pdf * self.det_to_local / (len2 * len);
+        let table = self.locate(u, t).0.pdf * self.det_to_local / (len2 * len);
         (1.0 - DEFENSIVE) * table + DEFENSIVE / (4.0 * PI)
     }
 
@@ -479,14 +465,6 @@ impl EnvMap {
         let u = v.x.atan2(-v.z) * (0.5 * FRAC_1_PI) - 0.5 / self.width as f32;
         let t = v.y.clamp(-1.0, 1.0).acos() * FRAC_1_PI;
         (u - u.floor(), t)
-    }
-
-    /// Index into [`EnvMap::cells`] of the cell holding texel coordinates `(u, t)`.
-    #[inline]
-    fn cell_index(&self, u: f32, t: f32) -> usize {
-        let i = ((u * self.width as f32) as usize).min(self.width - 1);
-        let j = ((t * (self.height - 1) as f32) as usize).min(self.height - 2);
-        j * self.width + i
     }
 
     /// Mitsuba's bilinear read-out at texel coordinates from [`EnvMap::texel_coords`], times

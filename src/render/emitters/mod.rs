@@ -13,40 +13,53 @@ use glam::{Vec2, Vec3};
 use std::fmt::Debug;
 use std::sync::Arc;
 
-/// A next-event sample: where the light comes from and what it brings.
+/// A next-event sample: where the light comes from, and what it brings, read through
+/// [`Lights::resolve`] once the shadow ray has passed.
 ///
-/// An emitter may leave `radiance` and `pdf` for later (`pending`): then they are read only
-/// once [`Lights::resolve`] is called, after the shadow ray passed. An environment map does so:
-/// reading a drawn texel misses the cache, and a blocked shadow ray then never pays for it.
+/// Why a separate read: an emitter may defer it. An environment map does: reading a drawn
+/// texel misses the cache, and a blocked shadow ray then never pays for it.
 #[derive(Debug, Clone, Copy)]
 pub struct LightSample {
     /// Unit direction from the shading point towards the emitter.
     pub wi: Vec3,
     /// Distance to the emitter point (`f32::INFINITY` for emitters at infinity).
     pub dist: f32,
-    /// Incident radiance (for a point light, intensity / distance²).
-    pub radiance: Rgb,
-    /// Solid-angle density (1 for deltas: unused in MIS); [`Lights::sample`] includes the
-    /// emitter choice, an [`Emitter`] does not.
-    pub pdf: f32,
     /// A point light: no other strategy can sample it.
     pub delta: bool,
-    /// Set when `radiance` and `pdf` are not read yet.
-    pub pending: Option<Pending>,
+    value: Value,
 }
 
-/// What an emitter needs to finish a draw it left pending: its own key, and (set by
-/// [`Lights::sample`]) which emitter it is.
+/// What a [`LightSample`] brings, or what its emitter needs to read it.
 #[derive(Debug, Clone, Copy)]
-pub struct Pending {
-    key: [u32; 3],
-    emitter: u32,
+enum Value {
+    /// Incident radiance (for a point light, intensity / distance²) and solid-angle density
+    /// (1 for deltas: unused in MIS), without the emitter choice.
+    Known { radiance: Rgb, pdf: f32 },
+    /// The emitter's key for [`Emitter::resolve`]; `emitter` is its index among the
+    /// non-area emitters, set by [`Lights::sample`].
+    Deferred { key: [u32; 3], emitter: u32 },
 }
 
-impl Pending {
-    /// An emitter's key for [`Emitter::resolve`].
-    pub fn new(key: [u32; 3]) -> Pending {
-        Pending { key, emitter: 0 }
+impl LightSample {
+    /// A sample whose radiance and density (without the emitter choice) are known.
+    pub fn new(wi: Vec3, dist: f32, radiance: Rgb, pdf: f32, delta: bool) -> LightSample {
+        LightSample {
+            wi,
+            dist,
+            delta,
+            value: Value::Known { radiance, pdf },
+        }
+    }
+
+    /// A direction towards an emitter at infinity (not a delta) whose radiance and density
+    /// the emitter reads from `key` in [`Emitter::resolve`].
+    pub fn deferred(wi: Vec3, key: [u32; 3]) -> LightSample {
+        LightSample {
+            wi,
+            dist: f32::INFINITY,
+            delta: false,
+            value: Value::Deferred { key, emitter: 0 },
+        }
     }
 }
 
@@ -61,8 +74,8 @@ pub trait Emitter: Debug + Send + Sync {
         false
     }
 
-    /// The `(radiance, pdf)` of a draw this emitter returned with `pending` set to `key`
-    /// (never called for an emitter that sets none).
+    /// The `(radiance, pdf)` of a draw this emitter returned as [`LightSample::deferred`]
+    /// with `key` (never called for an emitter that defers nothing).
     fn resolve(&self, _key: [u32; 3]) -> (Rgb, f32) {
         (Rgb::ZERO, 0.0)
     }
@@ -156,26 +169,21 @@ impl Lights {
             Some(light) => light.sample(from, u)?,
             None => self.others[i - self.area.len()].sample(from, u)?,
         };
-        if let Some(p) = &mut s.pending {
-            p.emitter = (i - self.area.len()) as u32;
-            return Some(s);
-        }
-        if !s.delta {
-            s.pdf *= self.choice_pdf();
-        } else {
-            s.pdf = self.choice_pdf();
+        if let Value::Deferred { emitter, .. } = &mut s.value {
+            *emitter = (i - self.area.len()) as u32;
         }
         Some(s)
     }
 
-    /// Reads the radiance and density of a draw of [`Lights::sample`] that an emitter left
-    /// pending (a no-op otherwise).
+    /// The incident radiance of a sample of [`Lights::sample`] and the density with which it
+    /// was drawn, emitter choice included (for a delta light, the choice alone).
     #[inline]
-    pub fn resolve(&self, s: &mut LightSample) {
-        if let Some(p) = s.pending.take() {
-            let (radiance, pdf) = self.others[p.emitter as usize].resolve(p.key);
-            s.radiance = radiance;
-            s.pdf = pdf * self.choice_pdf();
-        }
+    pub fn resolve(&self, s: &LightSample) -> (Rgb, f32) {
+        let (radiance, pdf) = match s.value {
+            Value::Known { radiance, pdf } => (radiance, pdf),
+            Value::Deferred { key, emitter } => self.others[emitter as usize].resolve(key),
+        };
+        let choice = self.choice_pdf();
+        (radiance, if s.delta { choice } else { pdf * choice })
     }
 }

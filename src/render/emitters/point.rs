@@ -52,13 +52,12 @@ impl Emitter for PointLight {
             return None;
         }
         let dist = d2.sqrt();
-        Some(LightSample {
-            wi: to / dist,
+        Some(LightSample::new(
+            to / dist,
             dist,
-            radiance: self.intensity / d2,
-            pdf: 1.0,
-            delta: true,
-            pending: None,
-        })
+            self.intensity / d2,
+            1.0,
+            true,
+        ))
     }
 }

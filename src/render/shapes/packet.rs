@@ -53,6 +53,11 @@ impl TrianglePacket {
         }
     }
 
+    /// Number of triangles (one to four: a packet is never empty).
+    pub fn count(&self) -> usize {
+        self.lanes.count_ones() as usize
+    }
+
     /// The watertight test of every lane; with `ANY`, a hit may be any lane's rather than the
     /// nearest.
     #[inline(always)]

@@ -251,11 +251,11 @@ impl Bitmap {
 
     fn texel(&self, x: usize, y: usize) -> [f32; 3] {
         let i = (y * self.width + x) * self.channels;
-        let d = &self.data;
-        if self.channels == 1 {
-            [d.get(i), 0.0, 0.0]
-        } else {
-            [d.get(i), d.get(i + 1), d.get(i + 2)]
+        match &self.data {
+            Texels::Float(data) => pick(self.channels, |k| data[i + k]),
+            Texels::Palette { index, values } => {
+                pick(self.channels, |k| values[usize::from(index[i + k])])
+            }
         }
     }
 
@@ -325,13 +325,15 @@ impl Texels {
         }
         Texels::Palette { index, values }
     }
+}
 
-    #[inline(always)]
-    fn get(&self, i: usize) -> f32 {
-        match self {
-            Texels::Float(data) => data[i],
-            Texels::Palette { index, values } => values[usize::from(index[i])],
-        }
+/// A texel's channels (one or three) as RGB, the missing ones 0.
+#[inline(always)]
+fn pick(channels: usize, value: impl Fn(usize) -> f32) -> [f32; 3] {
+    if channels == 1 {
+        [value(0), 0.0, 0.0]
+    } else {
+        [value(0), value(1), value(2)]
     }
 }
 
@@ -489,9 +491,15 @@ mod tests {
         values.push(-0.0);
         let data: Vec<f32> = (0..3 * 64 * 32).map(|i| values[(i * 37) % 256]).collect();
         let palette = Texels::new(data.clone());
-        assert!(matches!(palette, Texels::Palette { .. }));
+        let Texels::Palette { index, values } = &palette else {
+            panic!("256 distinct values make a palette");
+        };
         for (i, v) in data.iter().enumerate() {
-            assert_eq!(palette.get(i).to_bits(), v.to_bits(), "value {i}");
+            assert_eq!(
+                values[usize::from(index[i])].to_bits(),
+                v.to_bits(),
+                "value {i}"
+            );
         }
         let mut more = data.clone();
         more.push(0.5_f32.next_up());
