@@ -25,6 +25,7 @@ pub mod render;
 pub mod report;
 pub mod samples;
 pub mod scenes;
+pub mod simd;
 
 pub use error::{Error, Result};
 pub use estimators::{Bank, Estimator, EstimatorSpec};

@@ -142,14 +142,11 @@ fn nfor_denoises_and_keeps_feature_edges() {
 fn vector_and_scalar_paths_agree_bit_for_bit() {
     let input = input(0.3, 7);
     let fast = nfor(&input, &NforParams::paper()).unwrap();
-    fireflies::denoise::simd::force_scalar(true);
+    fireflies::simd::force_scalar(true);
     let slow = nfor(&input, &NforParams::paper());
-    fireflies::denoise::simd::force_scalar(false);
+    fireflies::simd::force_scalar(false);
     let slow = slow.unwrap();
-    eprintln!(
-        "vector path: {}",
-        fireflies::denoise::simd::instruction_set()
-    );
+    eprintln!("vector path: {}", fireflies::simd::instruction_set());
     let bits = |p: &Planes| -> Vec<u32> { p.all().iter().flatten().map(|v| v.to_bits()).collect() };
     assert!(
         bits(&fast.image) == bits(&slow.image),

@@ -7,7 +7,6 @@ pub mod nfor;
 pub mod nlmeans;
 pub mod planes;
 pub mod regression;
-pub mod simd;
 
 pub use nfor::{NforInput, NforOutput, NforParams, nfor};
 pub use planes::Planes;

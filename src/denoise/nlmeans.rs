@@ -26,8 +26,8 @@
 //! never a weight per pixel and offset of the whole image.
 
 use super::planes::Planes;
-use super::simd::vectorized;
 use crate::error::{Error, Result};
+use crate::simd::vectorized;
 use rayon::prelude::*;
 
 /// Side of the square tiles the filters work on.

@@ -26,8 +26,8 @@ use super::nlmeans::{
     Guide, MIN_CENTER_WEIGHT, NlMeansParams, Rect, Scratch, TILE, patch_distances, tiles, weight,
 };
 use super::planes::Planes;
-use super::simd::vectorized;
 use crate::error::{Error, Result};
+use crate::simd::vectorized;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 

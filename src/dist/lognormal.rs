@@ -8,6 +8,7 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::TruncatedMoments;
+use super::exp::{exp, exp_affine_in_place};
 use super::special::{ln_norm_cdf, norm_cdf, norm_inv_cdf, norm_sf, unit_f64};
 use crate::error::{Error, Num, Result};
 
@@ -188,7 +189,14 @@ impl LogNormal {
     #[inline]
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
         let z: f64 = StandardNormal.sample(rng);
-        (self.mu + self.sigma * z).exp()
+        exp(self.mu + self.sigma * z)
+    }
+
+    /// Fills `out` with the draws of as many [`LogNormal::sample`] calls: the normals first,
+    /// then their exponentials in one pass that vectorises.
+    pub fn fill<R: Rng + ?Sized>(&self, rng: &mut R, out: &mut [f64]) {
+        out.fill_with(|| StandardNormal.sample(rng));
+        exp_affine_in_place(out, self.sigma, self.mu, 1.0);
     }
 }
 
@@ -217,7 +225,7 @@ impl LogNormalAbove {
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
         let p = self.mass * (1.0 - unit_f64(rng));
         let z = -norm_inv_cdf(p);
-        (self.mu + self.sigma * z).exp().max(self.from)
+        exp(self.mu + self.sigma * z).max(self.from)
     }
 }
 

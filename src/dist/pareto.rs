@@ -11,6 +11,7 @@ use std::fmt;
 use rand::Rng;
 use rand_distr::{Distribution, Exp1};
 
+use super::exp::{exp, exp_affine_in_place};
 use super::special::{integrate, unit_f64};
 use super::{TruncatedMoments, check_positive_finite};
 use crate::error::{Error, Num, Result};
@@ -154,7 +155,14 @@ impl Pareto {
     #[inline]
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
         let e: f64 = Exp1.sample(rng);
-        self.scale * (e * self.inv_shape).exp()
+        self.scale * exp(e * self.inv_shape)
+    }
+
+    /// Fills `out` with the draws of as many [`Pareto::sample`] calls: the exponentials first,
+    /// then their exponentials in one pass that vectorises.
+    pub fn fill<R: Rng + ?Sized>(&self, rng: &mut R, out: &mut [f64]) {
+        out.fill_with(|| Exp1.sample(rng));
+        exp_affine_in_place(out, self.inv_shape, 0.0, self.scale);
     }
 }
 
@@ -346,7 +354,23 @@ impl TruncatedPareto {
     /// transform `-ln(1 - mass * u) / shape`. The result is clamped to `upper` against rounding.
     #[inline]
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
-        let y = if self.mass >= 0.5 {
+        (self.scale * exp(self.draw_log(rng))).min(self.upper)
+    }
+
+    /// Fills `out` with the draws of as many [`TruncatedPareto::sample`] calls: every `Y`
+    /// first, then their exponentials in one pass that vectorises.
+    pub fn fill<R: Rng + ?Sized>(&self, rng: &mut R, out: &mut [f64]) {
+        out.fill_with(|| self.draw_log(rng));
+        exp_affine_in_place(out, 1.0, 0.0, self.scale);
+        for x in out.iter_mut() {
+            *x = x.min(self.upper);
+        }
+    }
+
+    /// One `Y = ln(S / scale)`.
+    #[inline]
+    fn draw_log<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        if self.mass >= 0.5 {
             let e: f64 = Exp1.sample(rng);
             let y = e * self.inv_shape;
             if y < self.log_range {
@@ -356,8 +380,7 @@ impl TruncatedPareto {
             }
         } else {
             -(-self.mass * unit_f64(rng)).ln_1p() * self.inv_shape
-        };
-        (self.scale * y.exp()).min(self.upper)
+        }
     }
 }
 

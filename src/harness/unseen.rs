@@ -311,9 +311,7 @@ fn simulate_in_batches(
         let trials = batch.min(PAIR_TRIALS - done);
         let drawn = &mut samples[..n * trials];
         for trial in drawn.chunks_exact_mut(n) {
-            for s in trial.iter_mut() {
-                *s = d.dist.sample(&mut rng);
-            }
+            d.dist.fill(&mut rng, trial);
             let first = rng.random_range(0..n);
             if k == 2 {
                 let second = (first + rng.random_range(1..n)) % n;

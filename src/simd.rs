@@ -1,18 +1,18 @@
-//! Runs NFOR's inner loops with the widest vector units the CPU has.
+//! Runs inner loops with the widest vector units the CPU has: NFOR's NL-means distances and
+//! regression, and the samplers' pass of `exp` (`dist::exp`).
 //!
-//! The release build targets baseline x86-64 (SSE2), so that one binary runs everywhere; the
-//! loops of the NL-means distances and the regression are written to vectorise, and they gain
-//! 1.4x from AVX2 alone (measured on living-room, `-C target-cpu=x86-64-v3` against baseline).
-//! [`vectorized`] compiles its job once per instruction set (baseline, AVX2+FMA, AVX-512 on
-//! x86-64; NEON on aarch64) and picks one at run time through `pulp`, which keeps the crate free
-//! of `unsafe`. Everything the job should speed up must be inlined into it
-//! (`#[inline(always)]`).
+//! The release build targets baseline x86-64 (SSE2), so that one binary runs everywhere; those
+//! loops are written to vectorise, and NFOR's gain 1.4x from AVX2 alone (measured on
+//! living-room, `-C target-cpu=x86-64-v3` against baseline). [`vectorized`] compiles its job
+//! once per instruction set (baseline, AVX2+FMA, AVX-512 on x86-64; NEON on aarch64) and picks
+//! one at run time through `pulp`, which keeps the crate free of `unsafe`. Everything the job
+//! should speed up must be inlined into it (`#[inline(always)]`).
 //!
 //! Results do not depend on the choice: Rust never fuses a multiply and an add on its own, and
 //! the loops fix their summation order in code (several running sums, then their sum in order),
 //! so wider registers compute the same operations in the same order. `FIREFLIES_SIMD=scalar`
-//! forces the baseline path, as does [`force_scalar`]; `tests/denoise.rs` checks that
-//! both give the same bits.
+//! forces the baseline path, as does [`force_scalar`]; `tests/denoise.rs` and `dist::exp`'s
+//! tests check that both give the same bits.
 
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, Ordering};
