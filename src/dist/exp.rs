@@ -208,9 +208,9 @@ mod tests {
         }
     }
 
-    /// The vectorisable pass gives the bits of the one-by-one function, including when a pass
-    /// holds arguments outside the fast range (NaN, infinities, overflow, underflow) or ends
-    /// short.
+    /// The vectorised pass gives the bits of the one-by-one function, on the detected vector
+    /// units and on baseline ones, including when a pass holds arguments outside the fast range
+    /// (NaN, infinities, overflow, underflow) or ends short.
     #[test]
     fn in_place_pass_equals_one_by_one() {
         let specials = [
@@ -234,6 +234,13 @@ mod tests {
             let got: Vec<u64> = got.iter().map(|x| x.to_bits()).collect();
             assert_eq!(got, want[..len], "length {len}");
         }
+        // The baseline instructions give the same bits as the detected vector units.
+        crate::simd::force_scalar(true);
+        let mut scalar = xs.clone();
+        exp_affine_in_place(&mut scalar, a, b, c);
+        crate::simd::force_scalar(false);
+        let scalar: Vec<u64> = scalar.iter().map(|x| x.to_bits()).collect();
+        assert_eq!(scalar, want);
     }
 
     #[test]
