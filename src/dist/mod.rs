@@ -358,12 +358,21 @@ mod tests {
     #[test]
     fn fill_equals_repeated_sample() {
         // Beyond the presets: the laws whose fill has its own two passes, the truncated Pareto
-        // with each of its two ways to draw (wide and narrow cut).
+        // with each of its two ways to draw (wide and narrow cut), a mixture with every kind of
+        // component.
         let laws: Vec<Dist> = vec![
             Pareto::new(0.5, 1.2).unwrap().into(),
             TruncatedPareto::new(1.0, 1.5, 1e4).unwrap().into(),
             TruncatedPareto::new(1.0, 0.5, 1.5).unwrap().into(),
             LogNormal::new(-1.0, 2.5).unwrap().into(),
+            Dist::Mixture(
+                Mixture::new(vec![
+                    (0.3, TruncatedPareto::new(2.0, 0.8, 50.0).unwrap().into()),
+                    (0.3, PointMass::new(0.0).unwrap().into()),
+                    (0.4, Pareto::new(1.0, 1.1).unwrap().into()),
+                ])
+                .unwrap(),
+            ),
         ];
         for (p, d) in Preset::ALL
             .iter()
