@@ -6,8 +6,9 @@
 //! `e^x = 2^(k div N) * 2^((k mod N)/N) * e^r`. The 128 values `2^(i/N)` are stored correctly
 //! rounded together with what their rounding left out (`exp_table.rs`, written by
 //! `exp_table.py` in decimal arithmetic), `ln2/N` is split so that `k ln2/N` is exact, and `e^r`
-//! is a degree-5 Taylor polynomial (truncation below 6e-19 relative). Measured against
-//! correctly rounded values: see the tests and `exp_table.py --check`.
+//! is a degree-5 Taylor polynomial (truncation below 6e-19 relative). The tests measure it
+//! against 2560 references computed in decimal arithmetic (`exp_cases.txt`, written by
+//! `exp_table.py --cases`): at most 0.5045 ulp, where glibc's `exp` reaches 0.5.
 //!
 //! The result is the same on every IEEE-754 machine: only additions and multiplications in a
 //! fixed order (Rust never fuses them into FMAs on its own) and integer operations on bits.
@@ -175,8 +176,8 @@ mod tests {
     }
 
     /// The worst error over 2560 arguments with decimal-arithmetic references, 512 of them where
-    /// the reduced argument is largest. Without the table's tails the worst is near 1 ulp, with
-    /// a wrong polynomial coefficient or reduction constant it is thousands of ulps.
+    /// the reduced argument is largest (measured: 0.5045 ulp). Without the table's tails the
+    /// worst was 0.985 ulp, so the bound catches their loss, and any larger defect.
     #[test]
     fn within_about_half_an_ulp_of_the_exact_value() {
         let worst = cases()
