@@ -5,7 +5,8 @@
 //! Pajot et al.'s outlier delaying — on heavy-tailed samples whose true mean is known exactly.
 //!
 //! Layers (arrows point down): the command line -> [`report`] / [`harness`] -> [`dist`] ->
-//! [`estimators`] -> [`error`].
+//! [`estimators`] -> [`error`]; [`simd`] (run-time choice of vector units) is a leaf under
+//! [`dist`] and [`denoise`].
 //! The estimator contract, with worked examples, is `docs/estimators.md`.
 
 #![deny(missing_docs)]

@@ -34,9 +34,9 @@ def constants(digits: int):
     # What rounding left out, relative to the rounded value: exp adds it to its polynomial.
     tails = [float((t - Decimal(r)) / Decimal(r)) for t, r in zip(exact, table)]
     ln2_n = ln2 / N
-    # ln2/N (in [2^-8, 2^-7) for N = 128) cut to HI_BITS significant bits; the rest rounded.
-    assert N == 128
-    scale = Decimal(2) ** (HI_BITS - 1 + 8)
+    # ln2/N, in [2^-(TABLE_BITS+1), 2^-TABLE_BITS), cut to HI_BITS significant bits; the rest
+    # rounded.
+    scale = Decimal(2) ** (HI_BITS + TABLE_BITS)
     hi = float(int(ln2_n * scale) / scale)
     lo = float(ln2_n - Decimal(hi))
     inv = float(N / ln2)

@@ -25,13 +25,14 @@ pub fn validate_samples(samples: &[f64], first_index: u64) -> Result<()> {
         .iter()
         .zip(&lowest)
         .all(|(&p, &low)| p == 0.0 && low >= 0.0);
-    if lanes_valid && rest.iter().all(|&s| s >= 0.0 && s.is_finite()) {
+    let valid = |s: f64| s >= 0.0 && s.is_finite();
+    if lanes_valid && rest.iter().all(|&s| valid(s)) {
         return Ok(());
     }
     let (i, &value) = samples
         .iter()
         .enumerate()
-        .find(|(_, s)| !(**s >= 0.0 && s.is_finite()))
+        .find(|&(_, &s)| !valid(s))
         .expect("the fold found an invalid sample");
     Err(Error::InvalidSample {
         index: first_index + i as u64,
