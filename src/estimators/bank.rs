@@ -3,7 +3,8 @@
 //! before any estimator sees them: a bad block is rejected whole and leaves every estimator
 //! exactly as it was.
 
-use super::{Estimator, EstimatorSpec, Partition};
+use super::rgb::for_each_chunk;
+use super::{Estimator, EstimatorSpec, Partition, RgbEstimator};
 use crate::error::{Error, Result};
 
 /// Checks that every sample is finite and non-negative; `first_index` is the stream position
@@ -40,18 +41,30 @@ pub fn validate_samples(samples: &[f64], first_index: u64) -> Result<()> {
     })
 }
 
+/// Per estimator, the first earlier one that keeps a round-robin partition with as many sets
+/// (`sets[i]`, `None` for none), whose partition it adopts instead of feeding its own: the
+/// sharing rule of [`Bank`] and [`RgbBank`].
+fn leaders(sets: &[Option<usize>]) -> Vec<Option<usize>> {
+    sets.iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let m = (*m)?;
+            sets[..i].iter().position(|&k| k == Some(m))
+        })
+        .collect()
+}
+
 /// Many estimators over one validated sample stream.
 ///
 /// Estimators that keep one round-robin partition with the same number of sets (MoN, Gini,
-/// G-MoN and G-MoN_b at one M) see the same sets, so the Bank feeds one partition per such M
-/// and each of them copies it ([`Estimator::push_slice_sharing`]): 16 bytes a set per block
-/// instead of a compensated add per sample each. Blocks shorter than M go to every estimator
-/// directly, where the copy would cost more than the adds.
+/// G-MoN and G-MoN_b at one M) see the same sets, so only the first of them (the leader) adds
+/// the samples; each later one copies the leader's partition ([`Estimator::push_slice_sharing`]):
+/// 16 bytes a set per block instead of a compensated add per sample each, and no state beyond
+/// the estimators' own. Blocks shorter than M go to every estimator directly, where the copy
+/// would cost more than the adds.
 pub struct Bank {
     estimators: Vec<Box<dyn Estimator>>,
-    /// One partition per number of sets that at least two estimators keep.
-    shared: Vec<Partition>,
-    /// Per estimator, the index in `shared` of the partition it adopts.
+    /// Per estimator, the index of the leader whose partition it adopts.
     adopts: Vec<Option<usize>>,
     count: u64,
 }
@@ -68,40 +81,26 @@ impl Bank {
 
     /// Wraps already-built estimators (all must be empty).
     pub fn from_estimators(estimators: Vec<Box<dyn Estimator>>) -> Self {
-        let sets: Vec<Option<usize>> = estimators.iter().map(|e| e.partition_sets()).collect();
-        let mut shared: Vec<Partition> = Vec::new();
-        let adopts = sets
+        let sets: Vec<Option<usize>> = estimators
             .iter()
-            .map(|&m| {
-                let m = m.filter(|&m| sets.iter().filter(|&&k| k == Some(m)).count() >= 2)?;
-                let at = shared
-                    .iter()
-                    .position(|p| p.sets() == m)
-                    .unwrap_or_else(|| {
-                        shared.push(Partition::new(m).expect("an estimator already keeps M sets"));
-                        shared.len() - 1
-                    });
-                Some(at)
-            })
+            .map(|e| e.partition().map(Partition::sets))
             .collect();
         Bank {
+            adopts: leaders(&sets),
             estimators,
-            shared,
-            adopts,
             count: 0,
         }
     }
 
-    /// Validates the block, then feeds it to every estimator. On error nothing is applied.
+    /// Validates the block, then feeds it to every estimator, leaders before the estimators
+    /// that adopt their partitions. On error nothing is applied.
     pub fn push_slice(&mut self, samples: &[f64]) -> Result<()> {
         validate_samples(samples, self.count)?;
-        for p in &mut self.shared {
-            p.push_slice(samples);
-        }
-        for (e, adopt) in self.estimators.iter_mut().zip(&self.adopts) {
-            match adopt.map(|i| &self.shared[i]) {
-                Some(p) if samples.len() >= p.sets() => e.push_slice_sharing(samples, p),
-                _ => e.push_slice(samples),
+        for i in 0..self.estimators.len() {
+            let (done, rest) = self.estimators.split_at_mut(i);
+            match self.adopts[i].and_then(|l| done[l].partition()) {
+                Some(p) if samples.len() >= p.sets() => rest[0].push_slice_sharing(samples, p),
+                _ => rest[0].push_slice(samples),
             }
         }
         self.count += samples.len() as u64;
@@ -128,25 +127,97 @@ impl Bank {
         self.estimators.iter().map(|e| e.estimate()).collect()
     }
 
-    /// Total per-pixel state of the bank's estimators and shared partitions, in bytes.
+    /// Total per-pixel state of the bank's estimators, in bytes.
     pub fn state_bytes(&self) -> usize {
-        let shared: usize = self
-            .shared
-            .iter()
-            .map(|p| std::mem::size_of::<Partition>() + p.heap_bytes())
-            .sum();
-        self.estimators
-            .iter()
-            .map(|e| e.state_bytes())
-            .sum::<usize>()
-            + shared
+        self.estimators.iter().map(|e| e.state_bytes()).sum()
     }
 
     /// Forgets every sample, keeping the estimators and their allocations.
     pub fn reset(&mut self) {
         self.estimators.iter_mut().for_each(|e| e.reset());
-        self.shared.iter_mut().for_each(Partition::reset);
         self.count = 0;
+    }
+}
+
+/// The film's bank: the RGB estimators of one pixel over its stream of RGB samples, with the
+/// sharing rule of [`Bank`] applied per channel (the MoN family keeps one partition per
+/// channel). Each block is split into channels once, in chunks of 64 samples, for all
+/// per-channel estimators.
+pub struct RgbBank {
+    estimators: Vec<Box<dyn RgbEstimator>>,
+    /// Per estimator, the index of the leader whose three partitions it adopts.
+    adopts: Vec<Option<usize>>,
+    count: u64,
+}
+
+impl RgbBank {
+    /// Builds one RGB estimator per spec.
+    pub fn new(specs: &[EstimatorSpec]) -> Result<Self> {
+        let estimators: Vec<Box<dyn RgbEstimator>> = specs
+            .iter()
+            .map(EstimatorSpec::build_rgb)
+            .collect::<Result<_>>()?;
+        let sets: Vec<Option<usize>> = estimators
+            .iter()
+            .map(|e| e.channel_partitions().map(|p| p[0].sets()))
+            .collect();
+        Ok(RgbBank {
+            adopts: leaders(&sets),
+            estimators,
+            count: 0,
+        })
+    }
+
+    /// Validates the block (every channel finite and non-negative), then feeds it to every
+    /// estimator. On error nothing is applied; the error names the sample's index in the
+    /// pixel's stream.
+    pub fn push_slice(&mut self, samples: &[[f64; 3]]) -> Result<()> {
+        validate_samples(samples.as_flattened(), 0).map_err(|e| match e {
+            Error::InvalidSample { index, value } => Error::InvalidSample {
+                index: self.count + index / 3,
+                value,
+            },
+            other => other,
+        })?;
+        for_each_chunk(samples, |chunk, channels| {
+            for i in 0..self.estimators.len() {
+                let (done, rest) = self.estimators.split_at_mut(i);
+                let shared = self.adopts[i]
+                    .and_then(|l| done[l].channel_partitions())
+                    .filter(|p| chunk.len() >= p[0].sets());
+                rest[0].push_channels(chunk, channels, shared);
+            }
+        });
+        self.count += samples.len() as u64;
+        Ok(())
+    }
+
+    /// Samples accepted so far.
+    pub fn count(&self) -> u64 {
+        self.count
+    }
+
+    /// The estimators, in the order given.
+    pub fn estimators(&self) -> &[Box<dyn RgbEstimator>] {
+        &self.estimators
+    }
+
+    /// Hands the image's per-channel `σ_image` to every estimator that reads it (Jung's image
+    /// mode).
+    pub fn set_image_sigma(&mut self, sigma: [f64; 3]) -> Result<()> {
+        self.estimators
+            .iter_mut()
+            .try_for_each(|e| e.set_image_sigma(sigma))
+    }
+
+    /// Per-pixel bytes held beyond the bank's own struct: every estimator's state and the
+    /// bank's two per-estimator lists.
+    pub fn state_bytes(&self) -> usize {
+        let lists = size_of::<Box<dyn RgbEstimator>>() + size_of::<Option<usize>>();
+        self.estimators
+            .iter()
+            .map(|e| e.state_bytes() + lists)
+            .sum()
     }
 }
 
@@ -193,8 +264,7 @@ mod tests {
         ];
         let specs: Vec<EstimatorSpec> = texts.iter().map(|s| s.parse().unwrap()).collect();
         let mut bank = Bank::new(&specs).unwrap();
-        assert_eq!(bank.shared.len(), 1);
-        assert_eq!(bank.adopts, [Some(0), Some(0), Some(0), None, None]);
+        assert_eq!(bank.adopts, [None, Some(0), Some(0), None, None]);
         let mut alone: Vec<_> = specs.iter().map(|s| s.build().unwrap()).collect();
         let xs: Vec<f64> = (0..200u32).map(|i| f64::from(i * 7 % 13) * 0.5).collect();
         let mut rest = &xs[..];
@@ -220,6 +290,65 @@ mod tests {
         let mut fresh = Bank::new(&specs).unwrap();
         fresh.push_slice(&xs[..9]).unwrap();
         assert_eq!(bank.estimates().unwrap(), fresh.estimates().unwrap());
+    }
+
+    #[test]
+    fn rgb_bank_shares_per_channel_and_agrees_with_estimators_fed_alone() {
+        // The MoN family at M = 3 adopts the first one's three partitions; Jung, Zirr and Pajot
+        // take the chunked channels or the RGB block. Blocks of every length around M and
+        // around the 64-sample chunk (a chunk shorter than M bypasses the sharing, and M = 300
+        // never shares) give every channel's estimate bit for bit as an estimator fed alone.
+        let texts = [
+            "gini:M=3",
+            "mean",
+            "mon:M=3",
+            "gmonb:M=3,threshold=0",
+            "gmon:M=3",
+            "mon:M=300",
+            "jung:sigma_image=1",
+            "zirr",
+            "pajot-rot",
+        ];
+        let specs: Vec<EstimatorSpec> = texts.iter().map(|s| s.parse().unwrap()).collect();
+        let mut bank = RgbBank::new(&specs).unwrap();
+        assert_eq!(
+            bank.adopts,
+            [None, None, Some(0), Some(0), Some(0), None, None, None, None]
+        );
+        let mut alone: Vec<_> = specs.iter().map(|s| s.build_rgb().unwrap()).collect();
+        let xs: Vec<[f64; 3]> = (0..2000u32)
+            .map(|i| {
+                let v = f64::from(i * 7 % 13) * 0.5;
+                [v, v * v, if i % 97 == 0 { 1e6 } else { 0.25 }]
+            })
+            .collect();
+        let mut rest = &xs[..];
+        for len in [1, 2, 3, 4, 65, 7, 1, 30, 63, 129, 100, 257].iter().cycle() {
+            let block = &rest[..(*len).min(rest.len())];
+            bank.push_slice(block).unwrap();
+            alone.iter_mut().for_each(|e| e.push_slice(block));
+            for (b, a) in bank.estimators().iter().zip(&alone) {
+                assert_eq!(
+                    b.estimate().unwrap().map(f64::to_bits),
+                    a.estimate().unwrap().map(f64::to_bits),
+                    "{a}"
+                );
+                assert_eq!(b.count(), a.count());
+            }
+            rest = &rest[block.len()..];
+            if rest.is_empty() {
+                break;
+            }
+        }
+        assert_eq!(bank.count(), 2000);
+        let before: Vec<_> = bank.estimators().iter().map(|e| e.estimate().unwrap()).collect();
+        let e = bank
+            .push_slice(&[[1.0; 3], [2.0, f64::NAN, 0.0]])
+            .unwrap_err();
+        assert_eq!(e.to_string(), "invalid sample at index 2001: NaN");
+        let after: Vec<_> = bank.estimators().iter().map(|e| e.estimate().unwrap()).collect();
+        assert_eq!(before, after);
+        assert_eq!(bank.count(), 2000);
     }
 
     #[test]

@@ -14,6 +14,7 @@
 //! [`Partition`]), so the estimate itself is finite for any finite samples.
 
 use super::mon::{Partition, median_sorted};
+use super::numeric::plain_total;
 use super::rgb::per_channel;
 use super::{Estimator, EstimatorSpec, Extra, Extras, Key, Method, RgbEstimator, Welford, empty};
 use crate::error::{Error, Result};
@@ -148,8 +149,9 @@ impl Estimator for Jung {
 
     fn push_slice(&mut self, samples: &[f64]) {
         self.spread.push_block(samples);
+        let total = plain_total(samples);
         for p in &mut self.partitions {
-            p.push_slice(samples);
+            p.push_slice_totalled(samples, total);
         }
     }
 

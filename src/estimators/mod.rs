@@ -34,7 +34,7 @@ spec::methods! {
     PajotHybrid(pajot::PajotHybridSpec),
 }
 
-pub use bank::{Bank, validate_samples};
+pub use bank::{Bank, RgbBank, validate_samples};
 pub use clamp::Clamp;
 pub use jung::Jung;
 pub use mean::Mean;
@@ -101,16 +101,17 @@ pub trait Estimator: Send + Sync + fmt::Display {
     /// Forgets every sample, keeping the parameters (lets a harness reuse allocations).
     fn reset(&mut self);
 
-    /// The number of sets of the one round-robin partition the estimator keeps (MoN, Gini,
-    /// G-MoN, G-MoN_b), so that a [`Bank`] holding several with the same M feeds that
-    /// partition once and hands it to each: an optional capability, `None` by default.
-    fn partition_sets(&self) -> Option<usize> {
+    /// The one round-robin partition the estimator keeps (MoN, Gini, G-MoN, G-MoN_b), so that
+    /// a [`Bank`] holding several with the same M feeds only the first and hands its partition
+    /// to the others: an optional capability, `None` by default.
+    fn partition(&self) -> Option<&Partition> {
         None
     }
 
-    /// [`Estimator::push_slice`] when `partition` (with [`Estimator::partition_sets`] sets)
-    /// has been fed this estimator's whole stream, `samples` included: the estimator adopts
-    /// it and updates the rest of its state. Same result as `push_slice(samples)`.
+    /// [`Estimator::push_slice`] when `partition` (with as many sets as
+    /// [`Estimator::partition`]'s) has been fed this estimator's whole stream, `samples`
+    /// included: the estimator adopts it and updates the rest of its state. Same result as
+    /// `push_slice(samples)`.
     fn push_slice_sharing(&mut self, samples: &[f64], partition: &Partition) {
         let _ = partition;
         self.push_slice(samples);

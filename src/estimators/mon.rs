@@ -7,7 +7,7 @@
 //! on the `K = min(n, M)` non-empty set means. **Decision (docs/estimators.md §3):** wherever [B] writes M in
 //! the median, Gini, `k` and `c`, K is used; the two differ only while `n < M`.
 
-use super::numeric::{ScaledSum, ScaledSums};
+use super::numeric::{SAFE_TOTAL, ScaledSum, ScaledSums, plain_total};
 use super::rgb::per_channel;
 use super::{Estimator, EstimatorSpec, Extra, Extras, Key, Method, Neumaier, RgbEstimator, empty};
 use crate::error::{Error, Result};
@@ -21,7 +21,8 @@ pub const MAX_SETS: usize = 1 << 20;
 /// stack; more sets are copied to the heap, once per block of at least one round.
 const UNCHECKED_SETS: usize = 256;
 
-/// Round-robin partition of a stream into M sets, each a compensated sum.
+/// Round-robin partition of a stream of non-negative samples into M sets, each a compensated
+/// sum.
 ///
 /// Each set's sum is rescaled on its own if it would overflow (see `numeric`), so set means
 /// are finite for any finite samples and bit-identical to the plain ones when those are.
@@ -30,6 +31,9 @@ pub struct Partition {
     sums: ScaledSums,
     cursor: usize,
     n: u64,
+    /// Plain total of every sample so far (see [`SAFE_TOTAL`]): while it is below the bound,
+    /// blocks take the plain loop with no undo copy and no check.
+    seen: f64,
 }
 
 impl Partition {
@@ -46,6 +50,7 @@ impl Partition {
             sums: ScaledSums::new(m),
             cursor: 0,
             n: 0,
+            seen: 0.0,
         })
     }
 
@@ -62,6 +67,7 @@ impl Partition {
     /// Adds one sample to the next set in turn.
     #[inline(always)]
     pub fn push(&mut self, sample: f64) {
+        self.seen += sample;
         self.sums.add(self.cursor, sample);
         self.cursor += 1;
         if self.cursor == self.sums.len() {
@@ -72,16 +78,27 @@ impl Partition {
 
     /// Adds a block; same result as pushing one by one.
     ///
-    /// The sums are checked once per block, not per sample, so the loop stays the plain
-    /// (vectorized) compensated sum. A block shorter than one round adds one sample to each set
-    /// it touches, and is checked before it runs. A longer block runs first and checks each
-    /// set once at the end: sums of non-negative samples never decrease, so a set below the
-    /// limit at the end never passed it. In the rare case one did, the block is undone from a
-    /// copy of the sets (on the stack up to 256 sets) and pushed sample by sample, which
-    /// rescales that set.
+    /// While the plain total of the stream stays below [`SAFE_TOTAL`] (any stream of
+    /// renderer or generator samples), no set can approach the limit and the block is the
+    /// plain compensated loop. Beyond it the sums are checked once per block, not per sample:
+    /// a block shorter than one round adds one sample to each set it touches, and is checked
+    /// before it runs; a longer block runs first and checks each set once at the end (sums of
+    /// non-negative samples never decrease, so a set below the limit at the end never passed
+    /// it). In the rare case one did, the block is undone from a copy of the sets (on the
+    /// stack up to 256 sets) and pushed sample by sample, which rescales that set.
     pub fn push_slice(&mut self, samples: &[f64]) {
+        self.push_slice_totalled(samples, plain_total(samples));
+    }
+
+    /// [`Partition::push_slice`] given `total`, the [`plain_total`] of `samples`, for callers
+    /// that feed one block to several partitions (Jung's) and sum it once.
+    pub(crate) fn push_slice_totalled(&mut self, samples: &[f64], total: f64) {
+        self.seen += total;
         let m = self.sums.len();
-        if self.sums.any_scaled() {
+        if self.seen < SAFE_TOTAL {
+            Self::push_unchecked(self.sums.plain_mut(), &mut self.cursor, samples);
+            self.n += samples.len() as u64;
+        } else if self.sums.any_scaled() {
             self.push_each(samples);
         } else if samples.len() < m {
             self.push_short(samples);
@@ -148,19 +165,22 @@ impl Partition {
         // Finish the current round, then whole rounds, so the inner loop has no wrap test.
         let head = (m - *cursor).min(rest.len());
         for (sum, &s) in sums[*cursor..*cursor + head].iter_mut().zip(rest) {
-            sum.add(s);
+            sum.add_nonneg(s);
         }
-        *cursor = (*cursor + head) % m;
+        *cursor += head;
+        if *cursor == m {
+            *cursor = 0;
+        }
         rest = &rest[head..];
         let mut rounds = rest.chunks_exact(m);
         for round in &mut rounds {
             for (sum, &s) in sums.iter_mut().zip(round) {
-                sum.add(s);
+                sum.add_nonneg(s);
             }
         }
         let tail = rounds.remainder();
         for (sum, &s) in sums.iter_mut().zip(tail) {
-            sum.add(s);
+            sum.add_nonneg(s);
         }
         if !tail.is_empty() {
             *cursor = tail.len();
@@ -186,6 +206,7 @@ impl Partition {
         self.sums.copy_from(&other.sums);
         self.cursor = other.cursor;
         self.n = other.n;
+        self.seen = other.seen;
     }
 
     /// Forgets every sample.
@@ -193,6 +214,7 @@ impl Partition {
         self.sums.reset(self.sums.len());
         self.cursor = 0;
         self.n = 0;
+        self.seen = 0.0;
     }
 
     /// Heap bytes held by the sets.
@@ -348,8 +370,8 @@ macro_rules! partition_common {
             self.part.reset();
         }
 
-        fn partition_sets(&self) -> Option<usize> {
-            Some(self.part.sets())
+        fn partition(&self) -> Option<&Partition> {
+            Some(&self.part)
         }
 
         fn push_slice_sharing(&mut self, _samples: &[f64], partition: &Partition) {
@@ -531,8 +553,8 @@ impl Estimator for GmonB {
         self.total.add_all(samples.iter().copied());
     }
 
-    fn partition_sets(&self) -> Option<usize> {
-        Some(self.part.sets())
+    fn partition(&self) -> Option<&Partition> {
+        Some(&self.part)
     }
 
     fn push_slice_sharing(&mut self, samples: &[f64], partition: &Partition) {
@@ -596,6 +618,31 @@ mod tests {
                 b.sorted_means(&mut tb);
                 assert_eq!(ta, tb, "m={m} split={split}");
                 assert_eq!(a.cursor, b.cursor);
+            }
+        }
+    }
+
+    #[test]
+    fn blocks_across_the_safe_total_match_single_pushes() {
+        // Small samples, then huge ones: the plain total passes SAFE_TOTAL (2^1020, about
+        // 1.1e307) inside the stream and the sets pass SUM_LIMIT later, so blocks take the
+        // unchecked loop, then the checked one, then the rescaling fallback. Any block that
+        // took the unchecked loop past the bound would overflow a set to inf.
+        let xs: Vec<f64> = (0..400u32)
+            .map(|i| if i < 100 { f64::from(i) } else { 1e306 * f64::from(i % 7 + 1) })
+            .collect();
+        for m in [1, 3, 21] {
+            for len in [1, 5, 64] {
+                let mut a = Partition::new(m).unwrap();
+                xs.iter().for_each(|&s| a.push(s));
+                let mut b = Partition::new(m).unwrap();
+                xs.chunks(len).for_each(|c| b.push_slice(c));
+                let (mut ta, mut tb) = (Vec::new(), Vec::new());
+                a.sorted_means(&mut ta);
+                b.sorted_means(&mut tb);
+                assert!(tb.iter().all(|t| t.is_finite()), "m={m} len={len}");
+                assert_eq!(ta, tb, "m={m} len={len}");
+                assert!(b.sums.any_scaled(), "m={m}: the stream must reach the limit");
             }
         }
     }

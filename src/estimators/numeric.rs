@@ -23,6 +23,29 @@
 /// Plain running sums are kept below this magnitude, `2^1023`; see the module docs.
 const SUM_LIMIT: f64 = f64::from_bits(0x7FE0_0000_0000_0000);
 
+/// A stream of non-negative terms whose plain total ([`plain_total`] of every block, summed)
+/// stays below this, `2^1020`, cannot take any compensated sum of some of its terms to
+/// [`SUM_LIMIT`]: a running sum exceeds the exact sum of its terms by a factor of at most
+/// `1 + nε`, and so does the exact total the plain one, which leaves a factor of 8 to spare for
+/// any `n < 2^50`. Block loops below it need neither an undo copy nor a check.
+pub(crate) const SAFE_TOTAL: f64 = f64::from_bits(0x7FB0_0000_0000_0000);
+
+/// Plain sum of a block of non-negative finite terms, in eight lanes (so it vectorises; its
+/// order differs from a sequential sum, which does not matter for a bound): within a factor
+/// `1 ± nε` of the exact sum, or `+inf` if it overflows.
+#[inline]
+pub(crate) fn plain_total(terms: &[f64]) -> f64 {
+    let mut lanes = [0.0f64; 8];
+    let blocks = terms.chunks_exact(8);
+    let rest = blocks.remainder();
+    for block in blocks {
+        for (lane, &x) in lanes.iter_mut().zip(block) {
+            *lane += x;
+        }
+    }
+    lanes.iter().sum::<f64>() + rest.iter().sum::<f64>()
+}
+
 /// A rescaled sum holds its terms times `2^-SUM_SHIFT`.
 const SUM_SHIFT: i32 = 128;
 
@@ -58,6 +81,20 @@ impl Neumaier {
     pub fn add(&mut self, x: f64) {
         let t = self.sum + x;
         self.step(t, x);
+    }
+
+    /// [`Neumaier::add`] of `x ≥ 0` (or `-0`) to a sum of such terms: the same result, since
+    /// then both magnitudes are the values themselves, without taking them.
+    #[inline(always)]
+    pub(crate) fn add_nonneg(&mut self, x: f64) {
+        debug_assert!(x >= 0.0 && self.sum >= 0.0);
+        let t = self.sum + x;
+        if self.sum >= x {
+            self.compensation += (self.sum - t) + x;
+        } else {
+            self.compensation += (x - t) + self.sum;
+        }
+        self.sum = t;
     }
 
     /// The update of [`Neumaier::add`] once `t = s + x` is known.
@@ -447,6 +484,7 @@ mod tests {
     #[test]
     fn constants_are_the_powers_of_two_they_name() {
         assert_eq!(SUM_LIMIT, 2f64.powi(1023));
+        assert_eq!(SAFE_TOTAL, 2f64.powi(1020));
         assert_eq!(SUM_DOWN, 2f64.powi(-128));
         assert_eq!(SUM_UP, 2f64.powi(128));
     }

@@ -8,10 +8,12 @@
 //!
 //! * **Per channel** (`mean`, `clamp`, `mon`, `gini`, `gmonb`, `gmon`, `jung`): three scalar
 //!   estimators, one per channel; the estimate of channel `c` is the scalar estimator's estimate
-//!   of the channel-`c` stream. A block of samples is deinterleaved through a small stack
-//!   buffer (64 samples a channel, not part of the pixel's state), so each channel sees one
-//!   `push_slice` per 64 samples and no dynamic dispatch per sample. `jung` in image mode takes
-//!   one `σ_image` per channel ([`RgbEstimator::set_image_sigma`]).
+//!   of the channel-`c` stream. A block of samples is split into channels through stack
+//!   buffers ([`CHUNK`] samples a channel, not part of the pixel's state), so each channel sees
+//!   one `push_slice` per chunk and no dynamic dispatch per sample; an
+//!   [`RgbBank`](super::RgbBank) splits once for all its estimators and lets the MoN family
+//!   share partitions per channel. `jung` in image mode takes one `σ_image` per channel
+//!   ([`RgbEstimator::set_image_sigma`]).
 //! * **Zirr** (`zirr`, `zirr-ref`): the cascade runs on the luminance `L` of each sample, exactly
 //!   as the scalar method on the luminance stream (same `N`, buffers, counts, weights). Beside
 //!   each luminance buffer the pixel keeps an RGB buffer, into which each sample's RGB goes with
@@ -59,7 +61,7 @@
 
 use super::numeric::{ScaledSum, ScaledSums};
 use super::zirr::Splat;
-use super::{BoundStrategy, Estimator, EstimatorSpec, Pajot, Zirr, empty};
+use super::{BoundStrategy, Estimator, EstimatorSpec, Pajot, Partition, Zirr, empty};
 use crate::error::{Error, Result};
 use std::fmt;
 
@@ -117,6 +119,48 @@ pub trait RgbEstimator: Send + Sync + fmt::Display {
     fn luminance_cascade(&self) -> Option<&Zirr> {
         None
     }
+
+    /// The three per-channel round-robin partitions of a per-channel MoN-family estimator,
+    /// which an [`RgbBank`](super::RgbBank) hands to later estimators with as many sets (see
+    /// [`Estimator::partition`]): an optional capability, `None` by default.
+    fn channel_partitions(&self) -> Option<[&Partition; 3]> {
+        None
+    }
+
+    /// [`RgbEstimator::push_slice`] given the block also split into `channels`, and, when
+    /// `shared` is given, per-channel partitions that have been fed this estimator's whole
+    /// stream, `samples` included (see [`Estimator::push_slice_sharing`]). Same result as
+    /// `push_slice(samples)`; the default ignores both.
+    fn push_channels(
+        &mut self,
+        samples: &[[f64; 3]],
+        channels: [&[f64]; 3],
+        shared: Option<[&Partition; 3]>,
+    ) {
+        let _ = (channels, shared);
+        self.push_slice(samples);
+    }
+}
+
+/// Most samples split into channels at a time: three 512-byte stack buffers (zeroed on every
+/// call, so small: a pixel's block is often a few samples), long enough that a chunk holds a
+/// round of the usual M, so partitions can be shared chunk by chunk.
+pub(super) const CHUNK: usize = 64;
+
+/// Calls `f(chunk, [red, green, blue])` for consecutive chunks of at most [`CHUNK`] samples,
+/// with each chunk split into its three channels.
+pub(super) fn for_each_chunk(samples: &[[f64; 3]], mut f: impl FnMut(&[[f64; 3]], [&[f64]; 3])) {
+    let mut bufs = [[0.0f64; CHUNK]; 3];
+    for chunk in samples.chunks(CHUNK) {
+        for (c, buf) in bufs.iter_mut().enumerate() {
+            for (slot, px) in buf.iter_mut().zip(chunk) {
+                *slot = px[c];
+            }
+        }
+        let [r, g, b] = &bufs;
+        let n = chunk.len();
+        f(chunk, [&r[..n], &g[..n], &b[..n]]);
+    }
 }
 
 /// Builds the RGB estimator for a spec (every method), checking every parameter as
@@ -161,9 +205,6 @@ struct PerChannel<E> {
     ch: [E; 3],
 }
 
-/// Samples per channel deinterleaved at a time (a 512-byte stack buffer).
-const CHUNK: usize = 64;
-
 impl<E: Estimator> fmt::Display for PerChannel<E> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}[RGB]", self.ch[0])
@@ -178,14 +219,26 @@ impl<E: Estimator + 'static> RgbEstimator for PerChannel<E> {
             }
             return;
         }
-        let mut buf = [0.0f64; CHUNK];
-        for chunk in samples.chunks(CHUNK) {
-            let buf = &mut buf[..chunk.len()];
-            for (c, e) in self.ch.iter_mut().enumerate() {
-                for (slot, px) in buf.iter_mut().zip(chunk) {
-                    *slot = px[c];
-                }
-                e.push_slice(buf);
+        for_each_chunk(samples, |chunk, channels| {
+            self.push_channels(chunk, channels, None);
+        });
+    }
+
+    fn channel_partitions(&self) -> Option<[&Partition; 3]> {
+        let [r, g, b] = &self.ch;
+        Some([r.partition()?, g.partition()?, b.partition()?])
+    }
+
+    fn push_channels(
+        &mut self,
+        _samples: &[[f64; 3]],
+        channels: [&[f64]; 3],
+        shared: Option<[&Partition; 3]>,
+    ) {
+        for (c, e) in self.ch.iter_mut().enumerate() {
+            match shared {
+                Some(p) => e.push_slice_sharing(channels[c], p[c]),
+                None => e.push_slice(channels[c]),
             }
         }
     }

@@ -19,7 +19,7 @@ use super::nfor_buffers::{EstimatorHalves, HalfBuffer, NforBuffers};
 use super::sampler::SampleStream;
 use super::world::World;
 use crate::error::{Error, Result};
-use crate::estimators::{EstimatorSpec, RgbEstimator, Welford, build_rgb, luminance};
+use crate::estimators::{EstimatorSpec, RgbBank, RgbEstimator, Welford, luminance};
 use crate::image::Image;
 use crate::limits::MemoryLimit;
 use rayon::prelude::*;
@@ -79,9 +79,9 @@ pub fn file_stem(spec: &EstimatorSpec) -> String {
     spec.to_string().replace([':', ','], "_")
 }
 
-/// Per-pixel state: one RGB estimator per configured spec.
+/// Per-pixel state: a bank of one RGB estimator per configured spec.
 struct Pixel {
-    estimators: Vec<Box<dyn RgbEstimator>>,
+    bank: RgbBank,
 }
 
 /// Welford moments of `K` channels that see the same samples (one count for all).
@@ -144,7 +144,7 @@ fn feature_vector(f: &Features) -> [f64; FEATURES] {
 /// samples and of the features of all its samples (features are finite wherever the path is;
 /// a sample whose features are not is left out of them).
 struct Half {
-    estimators: Vec<Box<dyn RgbEstimator>>,
+    bank: RgbBank,
     color: Moments<3>,
     features: Moments<FEATURES>,
 }
@@ -229,11 +229,7 @@ fn check_memory(
 ) -> Result<usize> {
     let pixels = u128::from(width) * u128::from(height);
     let mut per_pixel = size_of::<Pixel>() as u128;
-    let mut bank = 0usize;
-    for spec in &cfg.estimators {
-        let e = build_rgb(spec)?;
-        bank += e.state_bytes() + size_of::<Box<dyn RgbEstimator>>();
-    }
+    let bank = RgbBank::new(&cfg.estimators)?.state_bytes();
     per_pixel += bank as u128;
     if nfor {
         per_pixel += nfor_bytes_per_pixel(bank, cfg.estimators.len()) as u128;
@@ -281,21 +277,14 @@ pub fn render_with_nfor(
     let (width, height) = (world.camera.width(), world.camera.height());
     let stops = check(cfg, width, height, nfor)?;
     let pixel_count = check_memory(cfg, width, height, &stops, nfor)?;
-    let bank = || {
-        cfg.estimators
-            .iter()
-            .map(build_rgb)
-            .collect::<Result<Vec<_>>>()
-    };
+    let bank = || RgbBank::new(&cfg.estimators);
     let mut pixels = Vec::with_capacity(pixel_count);
     for _ in 0..pixel_count {
-        pixels.push(Pixel {
-            estimators: bank()?,
-        });
+        pixels.push(Pixel { bank: bank()? });
     }
     let half = || -> Result<Half> {
         Ok(Half {
-            estimators: bank()?,
+            bank: bank()?,
             color: Moments::NEW,
             features: Moments::NEW,
         })
@@ -369,19 +358,16 @@ pub fn render_with_nfor(
         done = stop;
         if image_sigma {
             let sigma = [sigma[0].sigma(), sigma[1].sigma(), sigma[2].sigma()];
-            pixels.par_iter_mut().try_for_each(|p| {
-                p.estimators
-                    .iter_mut()
-                    .try_for_each(|e| e.set_image_sigma(sigma))
-            })?;
+            pixels
+                .par_iter_mut()
+                .try_for_each(|p| p.bank.set_image_sigma(sigma))?;
             // Each half reads its own samples' spread, so that nothing couples the halves.
             let half_sigma = half_sigma.map(|s| [s[0].sigma(), s[1].sigma(), s[2].sigma()]);
             nfor_pixels.par_iter_mut().try_for_each(|p| {
-                p.halves.iter_mut().zip(half_sigma).try_for_each(|(h, s)| {
-                    h.estimators
-                        .iter_mut()
-                        .try_for_each(|e| e.set_image_sigma(s))
-                })
+                p.halves
+                    .iter_mut()
+                    .zip(half_sigma)
+                    .try_for_each(|(h, s)| h.bank.set_image_sigma(s))
             })?;
         }
         if cfg.checkpoints.contains(&stop) || stop == cfg.spp {
@@ -391,7 +377,7 @@ pub fn render_with_nfor(
                     estimator: e,
                     spp: stop,
                     image: read_image(pixels.len(), width, height, |i| {
-                        pixels[i].estimators[e].as_ref()
+                        pixels[i].bank.estimators()[e].as_ref()
                     })?,
                 });
             }
@@ -405,7 +391,7 @@ pub fn render_with_nfor(
         .map(|e| {
             pixels
                 .iter()
-                .map(|p| p.estimators[e].state_bytes() as f64)
+                .map(|p| p.bank.estimators()[e].state_bytes() as f64)
                 .sum::<f64>()
                 / npix
         })
@@ -474,7 +460,7 @@ fn nfor_buffers(
     for (e, spec) in cfg.estimators.iter().enumerate() {
         let half = |k: usize| {
             read_image(pixels.len(), width, height, |i| {
-                pixels[i].halves[k].estimators[e].as_ref()
+                pixels[i].halves[k].bank.estimators()[e].as_ref()
             })
         };
         estimators.push(EstimatorHalves {
@@ -554,9 +540,9 @@ fn render_row(
                         }
                     }
                 }
-                for e in &mut half.estimators {
-                    e.push_slice(batch);
-                }
+                half.bank
+                    .push_slice(batch)
+                    .expect("the film pushes only finite, non-negative samples");
                 batch.clear();
             }
         }
@@ -567,9 +553,10 @@ fn render_row(
                 }
             }
         }
-        for e in &mut pixel.estimators {
-            e.push_slice(&samples);
-        }
+        pixel
+            .bank
+            .push_slice(&samples)
+            .expect("the film pushes only finite, non-negative samples");
         for (i, _) in dump_index.iter().enumerate().filter(|(_, d)| **d == index) {
             report
                 .dumps
