@@ -313,7 +313,17 @@ mod tests {
         let mut bank = RgbBank::new(&specs).unwrap();
         assert_eq!(
             bank.adopts,
-            [None, None, Some(0), Some(0), Some(0), None, None, None, None]
+            [
+                None,
+                None,
+                Some(0),
+                Some(0),
+                Some(0),
+                None,
+                None,
+                None,
+                None
+            ]
         );
         let mut alone: Vec<_> = specs.iter().map(|s| s.build_rgb().unwrap()).collect();
         let xs: Vec<[f64; 3]> = (0..2000u32)
@@ -341,12 +351,20 @@ mod tests {
             }
         }
         assert_eq!(bank.count(), 2000);
-        let before: Vec<_> = bank.estimators().iter().map(|e| e.estimate().unwrap()).collect();
+        let before: Vec<_> = bank
+            .estimators()
+            .iter()
+            .map(|e| e.estimate().unwrap())
+            .collect();
         let e = bank
             .push_slice(&[[1.0; 3], [2.0, f64::NAN, 0.0]])
             .unwrap_err();
         assert_eq!(e.to_string(), "invalid sample at index 2001: NaN");
-        let after: Vec<_> = bank.estimators().iter().map(|e| e.estimate().unwrap()).collect();
+        let after: Vec<_> = bank
+            .estimators()
+            .iter()
+            .map(|e| e.estimate().unwrap())
+            .collect();
         assert_eq!(before, after);
         assert_eq!(bank.count(), 2000);
     }

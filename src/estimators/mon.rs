@@ -629,7 +629,13 @@ mod tests {
         // unchecked loop, then the checked one, then the rescaling fallback. Any block that
         // took the unchecked loop past the bound would overflow a set to inf.
         let xs: Vec<f64> = (0..400u32)
-            .map(|i| if i < 100 { f64::from(i) } else { 1e306 * f64::from(i % 7 + 1) })
+            .map(|i| {
+                if i < 100 {
+                    f64::from(i)
+                } else {
+                    1e306 * f64::from(i % 7 + 1)
+                }
+            })
             .collect();
         for m in [1, 3, 21] {
             for len in [1, 5, 64] {
@@ -642,7 +648,10 @@ mod tests {
                 b.sorted_means(&mut tb);
                 assert!(tb.iter().all(|t| t.is_finite()), "m={m} len={len}");
                 assert_eq!(ta, tb, "m={m} len={len}");
-                assert!(b.sums.any_scaled(), "m={m}: the stream must reach the limit");
+                assert!(
+                    b.sums.any_scaled(),
+                    "m={m}: the stream must reach the limit"
+                );
             }
         }
     }

@@ -446,10 +446,21 @@ impl Welford {
             *self = *other;
             return;
         }
-        let n = (self.count + other.count) as f64;
+        let (na, nb) = (self.count as f64, other.count as f64);
+        let n = na + nb;
         let d = other.mean - self.mean;
-        self.mean += d * other.count as f64 / n;
-        self.m2 += other.m2 + d * d * (self.count as f64) * (other.count as f64) / n;
+        // Products in the formula's order, unless one overflows where the result need not
+        // (means near 1e154 and up): then with the count ratios formed first, which stays
+        // finite wherever the per-observation update does.
+        let step = d * nb / n;
+        self.mean += if step.is_finite() { step } else { d * (nb / n) };
+        let spread = d * d * na * nb / n;
+        self.m2 += other.m2
+            + if spread.is_finite() {
+                spread
+            } else {
+                d * (d * (na * nb / n))
+            };
         self.count += other.count;
     }
 }
@@ -613,5 +624,36 @@ mod tests {
         assert_eq!(a.count(), all.count());
         assert!((a.mean() - all.mean()).abs() < 1e-14);
         assert!((a.sigma() - all.sigma()).abs() < 1e-14);
+    }
+
+    #[test]
+    fn welford_merge_stays_finite_where_the_per_observation_update_does() {
+        // The case proptest found (tests/overflow.proptest-regressions): x near 1.1e154, then
+        // two zeros merged as a block. `d * d * 1 * 2` is 2.3e308 and overflowed, so Jung saw
+        // sigma = inf and took M = m_max; the literal update's m2 is (2/3)·x², finite.
+        let x = 863728196.9766042 * 2f64.powi(482);
+        let mut literal = Welford::new();
+        [x, 0.0, 0.0].iter().for_each(|&v| literal.push(v));
+        let mut merged = Welford::new();
+        merged.push_block(&[x]);
+        merged.push_block(&[0.0, 0.0]);
+        assert!(literal.sigma().is_finite());
+        assert!(
+            (merged.sigma() / literal.sigma() - 1.0).abs() < 1e-15,
+            "{:e} vs {:e}",
+            merged.sigma(),
+            literal.sigma()
+        );
+        assert_eq!(merged.mean(), literal.mean());
+        // The mean's step `d * 2` overflows for two observations of f64::MAX after a zero.
+        let mut merged = Welford::new();
+        merged.push_block(&[0.0]);
+        merged.push_block(&[f64::MAX, f64::MAX]);
+        let mut literal = Welford::new();
+        [0.0, f64::MAX, f64::MAX]
+            .iter()
+            .for_each(|&v| literal.push(v));
+        assert!(merged.mean().is_finite());
+        assert!((merged.mean() / literal.mean() - 1.0).abs() < 1e-15);
     }
 }
