@@ -6,6 +6,7 @@
 use super::rgb::for_each_chunk;
 use super::{Estimator, EstimatorSpec, Partition, RgbEstimator};
 use crate::error::{Error, Result};
+use std::sync::Arc;
 
 /// Checks that every sample is finite and non-negative; `first_index` is the stream position
 /// of `samples[0]`, so the error names the sample's index in the whole stream.
@@ -142,28 +143,45 @@ impl Bank {
 /// The film's bank: the RGB estimators of one pixel over its stream of RGB samples, with the
 /// sharing rule of [`Bank`] applied per channel (the MoN family keeps one partition per
 /// channel). Each block is split into channels once, in chunks of 64 samples, for all
-/// per-channel estimators.
+/// per-channel estimators. The specs and the sharing plan are the same for every pixel, so
+/// banks made with [`RgbBank::empty_like`] share them: a pixel pays one pointer for them.
 pub struct RgbBank {
     estimators: Vec<Box<dyn RgbEstimator>>,
+    plan: Arc<Plan>,
+    count: u64,
+}
+
+/// What every pixel's [`RgbBank`] of the same specs has in common.
+struct Plan {
+    specs: Vec<EstimatorSpec>,
     /// Per estimator, the index of the leader whose three partitions it adopts.
     adopts: Vec<Option<usize>>,
-    count: u64,
 }
 
 impl RgbBank {
     /// Builds one RGB estimator per spec.
     pub fn new(specs: &[EstimatorSpec]) -> Result<Self> {
-        let estimators: Vec<Box<dyn RgbEstimator>> = specs
-            .iter()
-            .map(EstimatorSpec::build_rgb)
-            .collect::<Result<_>>()?;
+        let estimators = build_rgb_all(specs)?;
         let sets: Vec<Option<usize>> = estimators
             .iter()
             .map(|e| e.channel_partitions().map(|p| p[0].sets()))
             .collect();
-        Ok(RgbBank {
+        let plan = Plan {
+            specs: specs.to_vec(),
             adopts: leaders(&sets),
+        };
+        Ok(RgbBank {
             estimators,
+            plan: Arc::new(plan),
+            count: 0,
+        })
+    }
+
+    /// A bank of the same specs with no samples, sharing this one's plan.
+    pub fn empty_like(&self) -> Result<Self> {
+        Ok(RgbBank {
+            estimators: build_rgb_all(&self.plan.specs)?,
+            plan: Arc::clone(&self.plan),
             count: 0,
         })
     }
@@ -182,7 +200,7 @@ impl RgbBank {
         for_each_chunk(samples, |chunk, channels| {
             for i in 0..self.estimators.len() {
                 let (done, rest) = self.estimators.split_at_mut(i);
-                let shared = self.adopts[i]
+                let shared = self.plan.adopts[i]
                     .and_then(|l| done[l].channel_partitions())
                     .filter(|p| chunk.len() >= p[0].sets());
                 rest[0].push_channels(chunk, channels, shared);
@@ -210,15 +228,19 @@ impl RgbBank {
             .try_for_each(|e| e.set_image_sigma(sigma))
     }
 
-    /// Per-pixel bytes held beyond the bank's own struct: every estimator's state and the
-    /// bank's two per-estimator lists.
+    /// Per-pixel bytes held beyond the bank's own struct: every estimator's state and its
+    /// entry in the bank's list (the shared plan is not counted).
     pub fn state_bytes(&self) -> usize {
-        let lists = size_of::<Box<dyn RgbEstimator>>() + size_of::<Option<usize>>();
         self.estimators
             .iter()
-            .map(|e| e.state_bytes() + lists)
+            .map(|e| e.state_bytes() + size_of::<Box<dyn RgbEstimator>>())
             .sum()
     }
+}
+
+/// One RGB estimator per spec.
+fn build_rgb_all(specs: &[EstimatorSpec]) -> Result<Vec<Box<dyn RgbEstimator>>> {
+    specs.iter().map(EstimatorSpec::build_rgb).collect()
 }
 
 #[cfg(test)]
@@ -312,7 +334,7 @@ mod tests {
         let specs: Vec<EstimatorSpec> = texts.iter().map(|s| s.parse().unwrap()).collect();
         let mut bank = RgbBank::new(&specs).unwrap();
         assert_eq!(
-            bank.adopts,
+            bank.plan.adopts,
             [
                 None,
                 None,
@@ -367,6 +389,17 @@ mod tests {
             .collect();
         assert_eq!(before, after);
         assert_eq!(bank.count(), 2000);
+        // A bank made like this one starts empty, with the same estimators and plan.
+        let mut like = bank.empty_like().unwrap();
+        assert!(Arc::ptr_eq(&like.plan, &bank.plan));
+        assert_eq!(like.count(), 0);
+        like.push_slice(&xs[..100]).unwrap();
+        let mut fresh = RgbBank::new(&specs).unwrap();
+        fresh.push_slice(&xs[..100]).unwrap();
+        for (a, b) in like.estimators().iter().zip(fresh.estimators()) {
+            assert_eq!(a.to_string(), b.to_string());
+            assert_eq!(a.estimate().unwrap(), b.estimate().unwrap());
+        }
     }
 
     #[test]

@@ -277,7 +277,8 @@ pub fn render_with_nfor(
     let (width, height) = (world.camera.width(), world.camera.height());
     let stops = check(cfg, width, height, nfor)?;
     let pixel_count = check_memory(cfg, width, height, &stops, nfor)?;
-    let bank = || RgbBank::new(&cfg.estimators);
+    let first = RgbBank::new(&cfg.estimators)?;
+    let bank = || first.empty_like();
     let mut pixels = Vec::with_capacity(pixel_count);
     for _ in 0..pixel_count {
         pixels.push(Pixel { bank: bank()? });
