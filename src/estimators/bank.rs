@@ -42,31 +42,42 @@ pub fn validate_samples(samples: &[f64], first_index: u64) -> Result<()> {
     })
 }
 
-/// Per estimator, the first earlier one that keeps a round-robin partition with as many sets
-/// (`sets[i]`, `None` for none), whose partition it adopts instead of feeding its own: the
-/// sharing rule of [`Bank`] and [`RgbBank`].
-fn leaders(sets: &[Option<usize>]) -> Vec<Option<usize>> {
+/// Where an estimator finds the partition it adopts: an earlier estimator and the index in
+/// its [`Estimator::partitions`].
+type Leader = (usize, usize);
+
+/// The sharing rule of [`Bank`] and [`RgbBank`]: an estimator that keeps exactly one partition
+/// (`sets[i]` lists the set counts of estimator `i`'s partitions) adopts the first partition
+/// with as many sets that an earlier estimator keeps (a MoN family member's, or one of Jung's),
+/// instead of filling its own.
+fn leaders(sets: &[Vec<usize>]) -> Vec<Option<Leader>> {
     sets.iter()
         .enumerate()
-        .map(|(i, m)| {
-            let m = (*m)?;
-            sets[..i].iter().position(|&k| k == Some(m))
+        .map(|(i, own)| {
+            let &[m] = own.as_slice() else {
+                return None;
+            };
+            sets[..i]
+                .iter()
+                .enumerate()
+                .find_map(|(j, theirs)| Some((j, theirs.iter().position(|&k| k == m)?)))
         })
         .collect()
 }
 
 /// Many estimators over one validated sample stream.
 ///
-/// Estimators that keep one round-robin partition with the same number of sets (MoN, Gini,
-/// G-MoN and G-MoN_b at one M) see the same sets, so only the first of them (the leader) adds
-/// the samples; each later one copies the leader's partition ([`Estimator::push_slice_sharing`]):
-/// 16 bytes a set per block instead of a compensated add per sample each, and no state beyond
-/// the estimators' own. Blocks shorter than M go to every estimator directly, where the copy
-/// would cost more than the adds.
+/// Estimators that keep round-robin partitions with the same number of sets (MoN, Gini, G-MoN
+/// and G-MoN_b at one M; Jung at every odd M up to its `m_max`) see the same sets, so only the
+/// first of them (the leader) adds the samples; each later MoN-family estimator with that M
+/// copies the leader's partition ([`Estimator::push_slice_sharing`]): 16 bytes a set per block
+/// instead of a compensated add per sample each, and no state beyond the estimators' own.
+/// Blocks shorter than M go to every estimator directly, where the copy would cost more than
+/// the adds.
 pub struct Bank {
     estimators: Vec<Box<dyn Estimator>>,
-    /// Per estimator, the index of the leader whose partition it adopts.
-    adopts: Vec<Option<usize>>,
+    /// Per estimator, where the partition it adopts is kept.
+    adopts: Vec<Option<Leader>>,
     count: u64,
 }
 
@@ -82,9 +93,9 @@ impl Bank {
 
     /// Wraps already-built estimators (all must be empty).
     pub fn from_estimators(estimators: Vec<Box<dyn Estimator>>) -> Self {
-        let sets: Vec<Option<usize>> = estimators
+        let sets: Vec<Vec<usize>> = estimators
             .iter()
-            .map(|e| e.partition().map(Partition::sets))
+            .map(|e| e.partitions().iter().map(Partition::sets).collect())
             .collect();
         Bank {
             adopts: leaders(&sets),
@@ -99,7 +110,7 @@ impl Bank {
         validate_samples(samples, self.count)?;
         for i in 0..self.estimators.len() {
             let (done, rest) = self.estimators.split_at_mut(i);
-            match self.adopts[i].and_then(|l| done[l].partition()) {
+            match self.adopts[i].map(|(l, k)| &done[l].partitions()[k]) {
                 Some(p) if samples.len() >= p.sets() => rest[0].push_slice_sharing(samples, p),
                 _ => rest[0].push_slice(samples),
             }
@@ -154,17 +165,22 @@ pub struct RgbBank {
 /// What every pixel's [`RgbBank`] of the same specs has in common.
 struct Plan {
     specs: Vec<EstimatorSpec>,
-    /// Per estimator, the index of the leader whose three partitions it adopts.
-    adopts: Vec<Option<usize>>,
+    /// Per estimator, where the three partitions it adopts are kept.
+    adopts: Vec<Option<Leader>>,
 }
 
 impl RgbBank {
     /// Builds one RGB estimator per spec.
     pub fn new(specs: &[EstimatorSpec]) -> Result<Self> {
         let estimators = build_rgb_all(specs)?;
-        let sets: Vec<Option<usize>> = estimators
+        let sets: Vec<Vec<usize>> = estimators
             .iter()
-            .map(|e| e.channel_partitions().map(|p| p[0].sets()))
+            .map(|e| {
+                e.channel_partitions()[0]
+                    .iter()
+                    .map(Partition::sets)
+                    .collect()
+            })
             .collect();
         let plan = Plan {
             specs: specs.to_vec(),
@@ -201,7 +217,7 @@ impl RgbBank {
             for i in 0..self.estimators.len() {
                 let (done, rest) = self.estimators.split_at_mut(i);
                 let shared = self.plan.adopts[i]
-                    .and_then(|l| done[l].channel_partitions())
+                    .map(|(l, k)| done[l].channel_partitions().map(|p| &p[k]))
                     .filter(|p| chunk.len() >= p[0].sets());
                 rest[0].push_channels(chunk, channels, shared);
             }
@@ -273,20 +289,29 @@ mod tests {
 
     #[test]
     fn estimators_with_one_m_share_a_partition_and_agree_with_their_own() {
-        // Three estimators at M = 3 share one partition, the lone M = 5 keeps its own. Blocks
-        // of every length around M (the short ones bypass the sharing) give estimates, extras
-        // and counts equal bit for bit to estimators fed alone; a copy that lagged a block,
-        // skipped the cursor or the count would change the sets' means.
+        // Three estimators at M = 3 share one partition; M = 7 keeps its own (Jung, who also
+        // keeps one, comes later); G-MoN at M = 9 and MoN at M = 5 copy Jung's. Blocks of
+        // every length around M (the short ones bypass the sharing) give estimates, extras and
+        // counts equal bit for bit to estimators fed alone; a copy that lagged a block, skipped
+        // the cursor or the count, or took the wrong one of Jung's partitions would change the
+        // sets' means.
         let texts = [
             "mon:M=3",
             "gini:M=3",
             "gmonb:M=3,threshold=0",
-            "mon:M=5",
+            "mon:M=7",
             "mean",
+            "jung:sigma_image=1,m_max=9",
+            "gmon:M=9",
+            "mon:M=5",
         ];
         let specs: Vec<EstimatorSpec> = texts.iter().map(|s| s.parse().unwrap()).collect();
         let mut bank = Bank::new(&specs).unwrap();
-        assert_eq!(bank.adopts, [None, Some(0), Some(0), None, None]);
+        let (j, m3) = (Some((5, 4)), Some((0, 0)));
+        assert_eq!(
+            bank.adopts,
+            [None, m3, m3, None, None, None, j, Some((5, 2))]
+        );
         let mut alone: Vec<_> = specs.iter().map(|s| s.build().unwrap()).collect();
         let xs: Vec<f64> = (0..200u32).map(|i| f64::from(i * 7 % 13) * 0.5).collect();
         let mut rest = &xs[..];
@@ -316,8 +341,8 @@ mod tests {
 
     #[test]
     fn rgb_bank_shares_per_channel_and_agrees_with_estimators_fed_alone() {
-        // The MoN family at M = 3 adopts the first one's three partitions; Jung, Zirr and Pajot
-        // take the chunked channels or the RGB block. Blocks of every length around M and
+        // The MoN family at M = 3 adopts the first one's three partitions, MoN at M = 5 Jung's
+        // third ones; Jung, Zirr and Pajot take the chunked channels or the RGB block. Blocks of every length around M and
         // around the 64-sample chunk (a chunk shorter than M bypasses the sharing, and M = 300
         // never shares) give every channel's estimate bit for bit as an estimator fed alone.
         let texts = [
@@ -328,6 +353,7 @@ mod tests {
             "gmon:M=3",
             "mon:M=300",
             "jung:sigma_image=1",
+            "mon:M=5",
             "zirr",
             "pajot-rot",
         ];
@@ -338,11 +364,12 @@ mod tests {
             [
                 None,
                 None,
-                Some(0),
-                Some(0),
-                Some(0),
+                Some((0, 0)),
+                Some((0, 0)),
+                Some((0, 0)),
                 None,
                 None,
+                Some((6, 2)),
                 None,
                 None
             ]

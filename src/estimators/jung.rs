@@ -162,6 +162,10 @@ impl Estimator for Jung {
         self.spread.count()
     }
 
+    fn partitions(&self) -> &[Partition] {
+        &self.partitions
+    }
+
     fn estimate(&self) -> Result<f64> {
         if self.count() == 0 {
             return Err(empty(self));

@@ -101,16 +101,17 @@ pub trait Estimator: Send + Sync + fmt::Display {
     /// Forgets every sample, keeping the parameters (lets a harness reuse allocations).
     fn reset(&mut self);
 
-    /// The one round-robin partition the estimator keeps (MoN, Gini, G-MoN, G-MoN_b), so that
-    /// a [`Bank`] holding several with the same M feeds only the first and hands its partition
-    /// to the others: an optional capability, `None` by default.
-    fn partition(&self) -> Option<&Partition> {
-        None
+    /// The round-robin partitions the estimator keeps of its whole stream (one for MoN, Gini,
+    /// G-MoN and G-MoN_b; Jung's nine), so that in a [`Bank`] an estimator that keeps exactly
+    /// one can copy an earlier estimator's partition with as many sets instead of filling its
+    /// own: an optional capability, none by default.
+    fn partitions(&self) -> &[Partition] {
+        &[]
     }
 
-    /// [`Estimator::push_slice`] when `partition` (with as many sets as
-    /// [`Estimator::partition`]'s) has been fed this estimator's whole stream, `samples`
-    /// included: the estimator adopts it and updates the rest of its state. Same result as
+    /// [`Estimator::push_slice`] when `partition` (with as many sets as this estimator's one
+    /// partition) has been fed this estimator's whole stream, `samples` included: the
+    /// estimator adopts it and updates the rest of its state. Same result as
     /// `push_slice(samples)`.
     fn push_slice_sharing(&mut self, samples: &[f64], partition: &Partition) {
         let _ = partition;

@@ -370,8 +370,8 @@ macro_rules! partition_common {
             self.part.reset();
         }
 
-        fn partition(&self) -> Option<&Partition> {
-            Some(&self.part)
+        fn partitions(&self) -> &[Partition] {
+            std::slice::from_ref(&self.part)
         }
 
         fn push_slice_sharing(&mut self, _samples: &[f64], partition: &Partition) {
@@ -553,8 +553,8 @@ impl Estimator for GmonB {
         self.total.add_all(samples.iter().copied());
     }
 
-    fn partition(&self) -> Option<&Partition> {
-        Some(&self.part)
+    fn partitions(&self) -> &[Partition] {
+        std::slice::from_ref(&self.part)
     }
 
     fn push_slice_sharing(&mut self, samples: &[f64], partition: &Partition) {

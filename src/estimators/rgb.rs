@@ -120,11 +120,11 @@ pub trait RgbEstimator: Send + Sync + fmt::Display {
         None
     }
 
-    /// The three per-channel round-robin partitions of a per-channel MoN-family estimator,
-    /// which an [`RgbBank`](super::RgbBank) hands to later estimators with as many sets (see
-    /// [`Estimator::partition`]): an optional capability, `None` by default.
-    fn channel_partitions(&self) -> Option<[&Partition; 3]> {
-        None
+    /// Per channel, the round-robin partitions of a per-channel estimator (see
+    /// [`Estimator::partitions`]), which an [`RgbBank`](super::RgbBank) hands to later
+    /// estimators with as many sets: an optional capability, none by default.
+    fn channel_partitions(&self) -> [&[Partition]; 3] {
+        [&[], &[], &[]]
     }
 
     /// [`RgbEstimator::push_slice`] given the block also split into `channels`, and, when
@@ -224,9 +224,9 @@ impl<E: Estimator + 'static> RgbEstimator for PerChannel<E> {
         });
     }
 
-    fn channel_partitions(&self) -> Option<[&Partition; 3]> {
+    fn channel_partitions(&self) -> [&[Partition]; 3] {
         let [r, g, b] = &self.ch;
-        Some([r.partition()?, g.partition()?, b.partition()?])
+        [r.partitions(), g.partitions(), b.partitions()]
     }
 
     fn push_channels(
