@@ -30,20 +30,12 @@ const SUM_LIMIT: f64 = f64::from_bits(0x7FE0_0000_0000_0000);
 /// any `n < 2^50`. Block loops below it need neither an undo copy nor a check.
 pub(crate) const SAFE_TOTAL: f64 = f64::from_bits(0x7FB0_0000_0000_0000);
 
-/// Plain sum of a block of non-negative finite terms, in eight lanes (so it vectorises; its
+/// Plain sum of a block of non-negative finite terms ([`lane_sum`], which vectorises; its
 /// order differs from a sequential sum, which does not matter for a bound): within a factor
 /// `1 ± nε` of the exact sum, or `+inf` if it overflows.
 #[inline]
 pub(crate) fn plain_total(terms: &[f64]) -> f64 {
-    let mut lanes = [0.0f64; 8];
-    let blocks = terms.chunks_exact(8);
-    let rest = blocks.remainder();
-    for block in blocks {
-        for (lane, &x) in lanes.iter_mut().zip(block) {
-            *lane += x;
-        }
-    }
-    lanes.iter().sum::<f64>() + rest.iter().sum::<f64>()
+    lane_sum(terms, |x| x)
 }
 
 /// A rescaled sum holds its terms times `2^-SUM_SHIFT`.
@@ -89,18 +81,20 @@ impl Neumaier {
     pub(crate) fn add_nonneg(&mut self, x: f64) {
         debug_assert!(x >= 0.0 && self.sum >= 0.0);
         let t = self.sum + x;
-        if self.sum >= x {
-            self.compensation += (self.sum - t) + x;
-        } else {
-            self.compensation += (x - t) + self.sum;
-        }
-        self.sum = t;
+        self.settle(t, x, self.sum >= x);
     }
 
     /// The update of [`Neumaier::add`] once `t = s + x` is known.
     #[inline(always)]
     fn step(&mut self, t: f64, x: f64) {
-        if self.sum.abs() >= x.abs() {
+        self.settle(t, x, self.sum.abs() >= x.abs());
+    }
+
+    /// Carries what `t = s + x` lost into the compensation, `sum_larger` saying which of `s`
+    /// and `x` is larger in magnitude, and makes `t` the running sum.
+    #[inline(always)]
+    fn settle(&mut self, t: f64, x: f64, sum_larger: bool) {
+        if sum_larger {
             self.compensation += (self.sum - t) + x;
         } else {
             self.compensation += (x - t) + self.sum;

@@ -541,9 +541,7 @@ fn render_row(
                         }
                     }
                 }
-                half.bank
-                    .push_slice(batch)
-                    .expect("the film pushes only finite, non-negative samples");
+                half.bank.push_slice(batch);
                 batch.clear();
             }
         }
@@ -554,10 +552,7 @@ fn render_row(
                 }
             }
         }
-        pixel
-            .bank
-            .push_slice(&samples)
-            .expect("the film pushes only finite, non-negative samples");
+        pixel.bank.push_slice(&samples);
         for (i, _) in dump_index.iter().enumerate().filter(|(_, d)| **d == index) {
             report
                 .dumps
