@@ -18,6 +18,7 @@ pub mod film;
 pub mod integrator;
 pub mod mitsuba;
 pub mod nfor_buffers;
+pub mod prefetch;
 pub mod reference;
 pub mod sampler;
 pub mod sampling;

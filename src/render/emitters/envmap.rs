@@ -72,6 +72,7 @@ use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::image::read::read_texture;
 use crate::render::mitsuba::Params;
+use crate::render::prefetch::prefetch;
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI, TAU};
 use std::fmt;
@@ -221,6 +222,12 @@ impl Emitter for EnvMap {
         }
         let (wi, radiance, pdf) = EnvMap::sample(self, u)?;
         Some(LightSample::new(wi, f32::INFINITY, radiance, pdf, false))
+    }
+
+    fn prefetch(&self, u: Vec2) {
+        if self.rigid && self.has_mass {
+            self.prefetch_draw(u);
+        }
     }
 
     fn resolve(&self, key: [u32; 3]) -> (Rgb, f32) {
@@ -447,6 +454,8 @@ impl EnvMap {
         let s = self.sample_table(u);
         let d = (self.to_world * s.dir).normalize();
         let cell = (s.j * self.width + s.i) as u32;
+        // Read by `read_cell` only after the shadow ray, which gives the line time to come.
+        prefetch(&self.cells[cell as usize]);
         (d, [cell, s.fu.to_bits(), s.ft.to_bits()])
     }
 
@@ -485,6 +494,16 @@ impl EnvMap {
         let i = (x as usize).min(self.width - 1);
         let j = (y as usize).min(self.height - 2);
         (&self.cells[j * self.width + i], x - i as f32, y - j as f32)
+    }
+
+    /// Starts loading the conditional bucket [`EnvMap::sample_table`] with `u` will read (the
+    /// row's marginal table is small and stays cached): the one load of a draw that missed the
+    /// cache.
+    #[inline]
+    fn prefetch_draw(&self, u: Vec2) {
+        let (j, _) = alias_sample(&self.rows, u.y);
+        let w = self.width;
+        prefetch(&self.buckets[j * w + alias_bucket(w, u.x).0]);
     }
 
     /// Draws a cell (row by its marginal, then column by its conditional), then a direction
@@ -602,10 +621,7 @@ fn alias_table(weights: &[f64]) -> Vec<AliasEntry> {
 /// the item (the part of `u` the draw did not consume).
 #[inline]
 fn alias_sample(table: &[AliasEntry], u: f32) -> (usize, f32) {
-    let n = table.len();
-    let x = u.clamp(0.0, ONE_MINUS_EPS) * n as f32;
-    let k = (x as usize).min(n - 1);
-    let f = (x - k as f32).clamp(0.0, ONE_MINUS_EPS);
+    let (k, f) = alias_bucket(table.len(), u);
     let entry = table[k];
     if f < entry.keep {
         (k, (f / entry.keep).min(ONE_MINUS_EPS))
@@ -613,6 +629,14 @@ fn alias_sample(table: &[AliasEntry], u: f32) -> (usize, f32) {
         let r = (f - entry.keep) / (1.0 - entry.keep);
         (entry.alias as usize, r.clamp(0.0, ONE_MINUS_EPS))
     }
+}
+
+/// The bucket of a table of `n` that `u` falls in, and where in it (in `[0, 1)`).
+#[inline]
+fn alias_bucket(n: usize, u: f32) -> (usize, f32) {
+    let x = u.clamp(0.0, ONE_MINUS_EPS) * n as f32;
+    let k = (x as usize).min(n - 1);
+    (k, (x - k as f32).clamp(0.0, ONE_MINUS_EPS))
 }
 
 /// Uniform direction on the unit sphere (density `1/4π`).

@@ -69,6 +69,10 @@ pub trait Emitter: Debug + Send + Sync {
     /// nothing.
     fn sample(&self, from: Vec3, u: Vec2) -> Option<LightSample>;
 
+    /// Starts loading what a later [`Emitter::sample`] with `u` will read first, if that is
+    /// a random place in a large table (see [`crate::render::prefetch`]). Only a hint.
+    fn prefetch(&self, _u: Vec2) {}
+
     /// Whether rays leaving the scene see it (an environment; at most one per scene).
     fn is_infinite(&self) -> bool {
         false
@@ -173,6 +177,18 @@ impl Lights {
             *emitter = (i - self.area.len()) as u32;
         }
         Some(s)
+    }
+
+    /// Starts loading what [`Lights::sample`] with the same `u_choice` and `u` will read first:
+    /// the integrator draws them before tracing the ray to the shading point, so the load
+    /// overlaps the traversal. Only a hint; results do not depend on it.
+    #[inline]
+    pub fn prefetch(&self, u_choice: f32, u: Vec2) {
+        let n = self.area.len() + self.others.len();
+        let i = ((u_choice * n as f32) as usize).min(n.saturating_sub(1));
+        if let Some(other) = i.checked_sub(self.area.len()).and_then(|k| self.others.get(k)) {
+            other.prefetch(u);
+        }
     }
 
     /// The incident radiance of a sample of [`Lights::sample`] and the density with which it
