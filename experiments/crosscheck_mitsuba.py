@@ -23,8 +23,10 @@ image means with its standard error, which bounds what the test could see); and 
 scenes the t statistic is only approximately t-distributed at small K.
 
 Speed: samples per second = width * height * spp / seconds, where seconds is the wall clock of
-the `mi.render` call alone for Mitsuba and the renderer's own `wall_s` for ours, summed over the
-seeds; both run on the same number of threads (`--threads`, default all cores).
+the `mi.render` call alone for Mitsuba and the renderer's own `render_s` for ours (its `wall_s`
+less `build_s`, the BVH and emitter tables, which Mitsuba builds in `load_file`), summed over the
+seeds; both run on the same number of threads (`--threads`, default all cores). Both load
+times are reported beside them.
 
 Scene copies and overrides. Some scenes cannot be given to both renderers as they are; the
 script then writes a modified copy of the XML next to the original (so that relative paths to
@@ -419,6 +421,7 @@ def render_ours(binary: Path, path: Path, spp: int, seeds: list, threads: int,
     import numpy as np
 
     images, seconds, reported, invalid = [], [], [], 0
+    built, loaded = [], []
     for seed in seeds:
         with tempfile.TemporaryDirectory(prefix="fireflies-crosscheck-") as out:
             cmd = [str(binary), "render", str(path), "--spp", str(spp), "--seed", str(seed),
@@ -440,7 +443,10 @@ def render_ours(binary: Path, path: Path, spp: int, seeds: list, threads: int,
                                        f"wrote no {needed.name}")
             images.append(rgb(np.array(mi.Bitmap(str(exr)))))
             info = json.loads(manifest.read_text())
-            seconds.append(float(info["wall_s"]))
+            # `render_s` since 2026-12-07; older binaries (`--binary`) report `wall_s` only.
+            seconds.append(float(info.get("render_s", info["wall_s"])))
+            built.append(float(info.get("build_s", 0.0)))
+            loaded.append(float(info.get("load_s", 0.0)))
             reported.append(float(info["samples_per_s"]))
             invalid += int(info.get("invalid_samples", 0))
     height, width = images[0].shape[:2]
@@ -450,6 +456,8 @@ def render_ours(binary: Path, path: Path, spp: int, seeds: list, threads: int,
         "samples_per_s": width * height * spp * len(seeds) / sum(seconds),
         "reported_samples_per_s": reported,
         "invalid_samples": invalid,
+        "load_s": loaded,
+        "build_s": built,
     }
 
 
@@ -671,7 +679,10 @@ def compare(path: Path, mitsuba_path: Path, ours_path: Path, our_args: list, arg
         print(f"  {message}", file=sys.stderr)
         return row
     row["ours"] = {k: ours[k] for k in
-                   ("samples_per_s", "seconds", "reported_samples_per_s", "invalid_samples")}
+                   ("samples_per_s", "seconds", "reported_samples_per_s", "invalid_samples",
+                    "load_s", "build_s")}
+    print(f"  ours: load {min(ours['load_s']):.2f} s + build {min(ours['build_s']):.2f} s, "
+          f"render {', '.join(f'{t:.2f}' for t in ours['seconds'])} s", file=sys.stderr)
     row["speed_ratio"] = ours["samples_per_s"] / mits["samples_per_s"]
     write_image_atomic(images / f"{stem}.ours.exr", ours["images"].mean(axis=0))
     if ours["images"].shape != mits["images"].shape:

@@ -171,9 +171,9 @@ impl Aabb {
     }
 }
 
-/// Per-ray traversal data.
+/// Per-ray traversal data (the triangle test's [`RayPre`] is made only when a leaf is
+/// reached: many rays, such as camera rays past a small object, never reach one).
 struct Trav {
-    pre: RayPre,
     o: [Vec4; 3],
     inv: [Vec4; 3],
     /// Per axis, the index in [`Node4::planes`] of the near plane (the max when the direction
@@ -188,7 +188,6 @@ impl Trav {
         let inv = Vec3::ONE / ray.d;
         let neg = |a: usize| usize::from(inv[a].is_sign_negative()) * 3;
         Trav {
-            pre: RayPre::new(ray),
             o: [0, 1, 2].map(|a| Vec4::splat(ray.o[a])),
             inv: [0, 1, 2].map(|a| Vec4::splat(inv[a])),
             near: [0, 1, 2].map(|a| a + neg(a)),
@@ -384,17 +383,19 @@ impl Bvh {
         if self.prims.is_empty() {
             return false;
         }
-        let tr = Trav::new(ray);
         let mut t_best = tmax;
         if let Some(leaf) = self.root_leaf {
-            return self.leaf::<ANY>(leaf, &tr.pre, tmin, &mut t_best, best);
+            return self.leaf::<ANY>(leaf, &RayPre::new(ray), tmin, &mut t_best, best);
         }
+        let tr = Trav::new(ray);
+        let mut pre: Option<RayPre> = None;
         // ArrayVec: no zero-fill of the whole stack on every ray.
         let mut stack: ArrayVec<(Child, f32), STACK> = ArrayVec::new();
         let mut next = Child(0);
         loop {
             if next.is_leaf() {
-                if self.leaf::<ANY>(next, &tr.pre, tmin, &mut t_best, best) && ANY {
+                let pre = pre.get_or_insert_with(|| RayPre::new(ray));
+                if self.leaf::<ANY>(next, pre, tmin, &mut t_best, best) && ANY {
                     return true;
                 }
             } else {
@@ -413,13 +414,24 @@ impl Bvh {
                         }
                         continue;
                     }
-                    if mask & (mask - 1) == 0 {
+                    let k0 = mask.trailing_zeros() as usize;
+                    let rest = mask & (mask - 1);
+                    if rest == 0 {
                         // One child hit (the common case deep in the tree): nothing to order.
-                        next = n.child[mask.trailing_zeros() as usize];
+                        next = n.child[k0];
                         continue;
                     }
-                    // Nearest first: sort the (at most four) hits by entry distance, stack all
-                    // but the nearest farthest-first.
+                    if rest & (rest - 1) == 0 {
+                        // Two: the nearer first; on a tie the later lane, as the sort below.
+                        let k1 = rest.trailing_zeros() as usize;
+                        let (near, far) = if t[k0] < t[k1] { (k0, k1) } else { (k1, k0) };
+                        stack.push((n.child[far], t[far]));
+                        next = n.child[near];
+                        continue;
+                    }
+                    // Nearest first: sort the three or four hits by entry distance, stack all
+                    // but the nearest farthest-first (among equal distances the later lane is
+                    // visited first).
                     let mut hits: ArrayVec<(f32, Child), 4> = ArrayVec::new();
                     while mask != 0 {
                         let k = mask.trailing_zeros() as usize;

@@ -137,13 +137,13 @@ fn trace<const FEATURES: bool>(
     let mut awaiting_visibility = false;
 
     loop {
-        // Next-event estimation's numbers are drawn now, before the ray is traced rather than
-        // at the hit: tracing draws none, so the stream is the same, and an emitter can start
-        // loading the table entry the draw will read while the ray traverses the BVH.
-        let u_choice = rng.next_1d();
-        let u_light = rng.next_2d();
-        if depth + 1 < max_depth {
-            lights.prefetch(u_choice, u_light);
+        if lights.prefetches() && depth + 1 < max_depth {
+            // Tracing draws no numbers, so next-event estimation at the hit will draw the next
+            // three: read them ahead, so that an emitter can start loading the table entry its
+            // draw will read while the ray traverses the BVH.
+            let mut ahead = rng.clone();
+            let u_choice = ahead.next_1d();
+            lights.prefetch(u_choice, ahead.next_2d());
         }
         let Some(hit) = world.bvh.intersect(&ray, tmin, tmax) else {
             if let Some((le, light_pdf)) = lights.environment(ray.d) {
@@ -205,6 +205,8 @@ fn trace<const FEATURES: bool>(
         };
 
         // Next-event estimation.
+        let u_choice = rng.next_1d();
+        let u_light = rng.next_2d();
         if bsdf.has_smooth_lobe() {
             let mut visible = false;
             if let Some(ls) = lights.sample(hit.p, u_choice, u_light) {

@@ -225,9 +225,15 @@ impl Emitter for EnvMap {
     }
 
     fn prefetch(&self, u: Vec2) {
-        if self.rigid && self.has_mass {
+        if self.prefetches() {
             self.prefetch_draw(u);
         }
+    }
+
+    /// A rigid map with mass draws from its tables ([`EnvMap::sample_direction`]); the others
+    /// take another path (or none).
+    fn prefetches(&self) -> bool {
+        self.rigid && self.has_mass
     }
 
     fn resolve(&self, key: [u32; 3]) -> (Rgb, f32) {

@@ -73,6 +73,11 @@ pub trait Emitter: Debug + Send + Sync {
     /// a random place in a large table (see [`crate::render::prefetch`]). Only a hint.
     fn prefetch(&self, _u: Vec2) {}
 
+    /// Whether [`Emitter::prefetch`] does anything (so that callers skip computing its `u`).
+    fn prefetches(&self) -> bool {
+        false
+    }
+
     /// Whether rays leaving the scene see it (an environment; at most one per scene).
     fn is_infinite(&self) -> bool {
         false
@@ -101,6 +106,8 @@ pub struct Lights {
     others: Vec<Arc<dyn Emitter>>,
     /// The one in `others` at infinity, if any.
     environment: Option<Arc<dyn Emitter>>,
+    /// Whether any of `others` prefetches ([`Emitter::prefetches`]).
+    prefetches: bool,
 }
 
 impl Lights {
@@ -120,6 +127,7 @@ impl Lights {
             by_shape,
             others: scene.emitters.clone(),
             environment,
+            prefetches: scene.emitters.iter().any(|e| e.prefetches()),
         }
     }
 
@@ -179,9 +187,15 @@ impl Lights {
         Some(s)
     }
 
+    /// Whether [`Lights::prefetch`] does anything.
+    #[inline]
+    pub fn prefetches(&self) -> bool {
+        self.prefetches
+    }
+
     /// Starts loading what [`Lights::sample`] with the same `u_choice` and `u` will read first:
-    /// the integrator draws them before tracing the ray to the shading point, so the load
-    /// overlaps the traversal. Only a hint; results do not depend on it.
+    /// the integrator reads them ahead, before tracing the ray to the shading point, so the
+    /// load overlaps the traversal. Only a hint; results do not depend on it.
     #[inline]
     pub fn prefetch(&self, u_choice: f32, u: Vec2) {
         let n = self.area.len() + self.others.len();
