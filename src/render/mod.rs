@@ -15,6 +15,7 @@ pub mod bvh;
 pub mod camera;
 pub mod emitters;
 pub mod film;
+pub mod huge_table;
 pub mod integrator;
 pub mod mitsuba;
 pub mod nfor_buffers;

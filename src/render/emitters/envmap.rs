@@ -71,8 +71,10 @@ use super::{Emitter, LightSample};
 use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::image::read::read_texture;
+use crate::render::huge_table::HugeTable;
 use crate::render::mitsuba::Params;
 use crate::render::prefetch::prefetch;
+use bytemuck::{Pod, Zeroable};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI, TAU};
 use std::fmt;
@@ -118,9 +120,9 @@ pub struct EnvMap {
     /// Alias table of the cell rows (`H − 1` entries).
     rows: Vec<AliasEntry>,
     /// Per cell row, the alias table of its `W` cells given the row (row-major, as `cells`).
-    buckets: Vec<AliasEntry>,
+    buckets: HugeTable<AliasEntry>,
     /// The `(H − 1)·W` cells, row-major: corner texels and density.
-    cells: Vec<Cell>,
+    cells: HugeTable<Cell>,
     /// `1 − cos θ_k` at the `H` texel rows, exact near the north pole.
     one_minus_cos: Vec<f32>,
     /// `1 + cos θ_k` at the `H` texel rows, exact near the south pole.
@@ -149,13 +151,15 @@ impl fmt::Debug for EnvMap {
 /// quarter of the living room's render time. A cell repeats its four corners: 64 bytes per
 /// cell, 134 MB for a 2048x1024 map (plus 16 MB of alias buckets), where the texels, densities
 /// and buckets took 48 MB.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
 #[repr(C, align(64))]
 struct Cell {
     /// Texels `(i, j)`, `(i + 1, j)`, `(i, j + 1)`, `(i + 1, j + 1)` (column `W` is column 0).
     corners: [Vec3; 4],
     /// Solid-angle density in the local frame (0 for a black cell or a black map).
     pdf: f32,
+    /// Fills the cache line (plain data has no implicit padding).
+    unused: [f32; 3],
 }
 
 const _: () = assert!(std::mem::size_of::<Cell>() == 64);
@@ -305,18 +309,18 @@ impl EnvMap {
             det_to_local: to_local.determinant().abs(),
             has_mass: false,
             rows: Vec::new(),
-            buckets: Vec::new(),
-            cells: Vec::new(),
+            buckets: HugeTable::default(),
+            cells: HugeTable::default(),
             one_minus_cos: Vec::new(),
             one_plus_cos: Vec::new(),
         };
-        map.build_tables(&texels);
+        map.build_tables(&texels)?;
         Ok(map)
     }
 
     /// Builds the sampling tables (all sums in `f64`, so that a cell of tiny mass keeps its
     /// share until the final rounding to `f32`).
-    fn build_tables(&mut self, texels: &[Vec3]) {
+    fn build_tables(&mut self, texels: &[Vec3]) -> Result<()> {
         let (w, h) = (self.width, self.height);
         let rows = h - 1;
         let lum: Vec<f64> = texels
@@ -357,8 +361,8 @@ impl EnvMap {
             self.rows = alias_table(&row_mass);
         }
 
-        self.cells = Vec::with_capacity(rows * w);
-        self.buckets = Vec::with_capacity(rows * w);
+        self.cells = HugeTable::zeroed(rows * w, "environment map cells")?;
+        self.buckets = HugeTable::zeroed(rows * w, "environment map alias tables")?;
         for j in 0..rows {
             let row = &mean[j * w..(j + 1) * w];
             let buckets = if self.has_mass && row_mass[j] > 0.0 {
@@ -372,7 +376,7 @@ impl EnvMap {
                     })
                     .collect()
             };
-            self.buckets.extend(buckets);
+            self.buckets[j * w..(j + 1) * w].copy_from_slice(&buckets);
             for (i, &m) in row.iter().enumerate() {
                 let k = j * stride + i;
                 let pdf = if self.has_mass && m > 0.0 {
@@ -381,7 +385,7 @@ impl EnvMap {
                 } else {
                     0.0
                 };
-                self.cells.push(Cell {
+                self.cells[j * w + i] = Cell {
                     corners: [
                         texels[k],
                         texels[k + 1],
@@ -389,9 +393,11 @@ impl EnvMap {
                         texels[k + stride + 1],
                     ],
                     pdf,
-                });
+                    unused: [0.0; 3],
+                };
             }
         }
+        Ok(())
     }
 
     /// Radiance arriving along a ray that escaped with unit world direction `d` (Mitsuba's
@@ -576,7 +582,8 @@ fn linear_parts(to_world: Mat4) -> Result<(Mat3, Mat3)> {
 /// Why not a cumulative table and a binary search: on a 2048x1024 map the column search's dozen
 /// dependent reads each missed the cache, and sampling the map took a third of the living room's
 /// render time. An alias draw reads one 8-byte entry.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+#[repr(C)]
 struct AliasEntry {
     keep: f32,
     alias: u32,

@@ -200,7 +200,10 @@ impl Lights {
     pub fn prefetch(&self, u_choice: f32, u: Vec2) {
         let n = self.area.len() + self.others.len();
         let i = ((u_choice * n as f32) as usize).min(n.saturating_sub(1));
-        if let Some(other) = i.checked_sub(self.area.len()).and_then(|k| self.others.get(k)) {
+        if let Some(other) = i
+            .checked_sub(self.area.len())
+            .and_then(|k| self.others.get(k))
+        {
             other.prefetch(u);
         }
     }
