@@ -568,7 +568,7 @@ def markdown(settings: dict, rows: list) -> str:
         f"2020) at family alpha = {FAMILY_ALPHA} per scene, Sidak-corrected; without bias "
         f"about {FAMILY_ALPHA * 100:g}% of scenes show one rejecting test by chance, and a "
         f"single rejecting scene fails the check. Samples/s = width x height x spp / wall-clock "
-        f"seconds of the render (Mitsuba: the `mi.render` call; ours: `wall_s`).",
+        f"seconds of the render (Mitsuba: the `mi.render` call; ours: `render_s`, the render after the scene is built).",
         "",
         "| scene | size | spp | seeds | blocks rejecting / tests | mean rel. diff ± SE "
         "| Mitsuba Msamples/s | ours Msamples/s | ratio | verdict |",

@@ -16,8 +16,9 @@
 //! by `1 + 2γ₃` (Ize 2013) so rounding cannot cull a box whose primitive the watertight
 //! triangle test would hit.
 
+use super::prefetch::prefetch;
 use super::shapes::packet::{PacketHit, TrianglePacket};
-use super::shapes::{Hit, Primitive, RawHit, Ray, RayPre};
+use super::shapes::{Hit, Primitive, RawHit, Ray, RayPre, TriangleAttrs};
 use arrayvec::ArrayVec;
 use glam::{Vec3, Vec4};
 
@@ -125,6 +126,11 @@ pub struct Bvh {
     root_leaf: Option<Child>,
     bounds: Option<(Vec3, Vec3)>,
     prims: Vec<Primitive>,
+    /// The triangles' normals and texture coordinates, in `prims` order (empty when no
+    /// primitive has any). Why not in each triangle's own box: finishing a hit then waited for
+    /// the primitive and, after it, for the box; here both addresses are known at the hit, and
+    /// both are prefetched while the traversal goes on.
+    attrs: Vec<TriangleAttrs>,
 }
 
 /// A primitive's box and centroid during the build.
@@ -259,7 +265,7 @@ impl Bvh {
         let mut binary = Vec::with_capacity(2 * prims.len() / MAX_LEAF + 1);
         build_node(&mut binary, &mut items, 0, 0);
         let mut slots: Vec<Option<Primitive>> = prims.into_iter().map(Some).collect();
-        let prims: Vec<Primitive> = items
+        let mut prims: Vec<Primitive> = items
             .iter()
             .map(|it| {
                 slots[it.index as usize]
@@ -267,6 +273,14 @@ impl Bvh {
                     .expect("each primitive once")
             })
             .collect();
+        let attrs = if prims.iter().any(|p| p.attrs().is_some()) {
+            prims
+                .iter_mut()
+                .map(|p| p.take_attrs().unwrap_or_default())
+                .collect()
+        } else {
+            Vec::new()
+        };
         let root = &binary[0];
         let bounds = Some((root.bounds[0], root.bounds[1]));
         let mut nodes = Vec::with_capacity(binary.len() / 2 + 1);
@@ -292,6 +306,7 @@ impl Bvh {
             root_leaf,
             bounds,
             prims,
+            attrs,
         }
     }
 
@@ -319,7 +334,7 @@ impl Bvh {
     pub fn intersect(&self, ray: &Ray, tmin: f32, tmax: f32) -> Option<Hit> {
         let mut best: Option<(usize, RawHit)> = None;
         self.traverse::<false>(ray, tmin, tmax, &mut best);
-        best.map(|(i, h)| self.prims[i].finish(ray, &h))
+        best.map(|(i, h)| self.prims[i].finish(ray, &h, self.attrs.get(i)))
     }
 
     /// Whether anything is hit with `t` in `(tmin, tmax)` (stops at the first hit).
@@ -349,6 +364,14 @@ impl Bvh {
                     PacketHit::Hit(lane, h) => {
                         *t_best = h.t;
                         *best = Some((first + lane, h));
+                        if !ANY {
+                            // The packet holds the vertices only: start loading what the hit
+                            // will be finished from while the traversal goes on.
+                            prefetch(&self.prims[first + lane]);
+                            if let Some(a) = self.attrs.get(first + lane) {
+                                prefetch(a);
+                            }
+                        }
                         return true;
                     }
                     PacketHit::Unsure => first..first + packet.triangles.count(),

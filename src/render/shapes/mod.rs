@@ -138,7 +138,7 @@ pub struct DiskData {
 }
 
 /// What a triangle interpolates besides its position.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct TriangleAttrs {
     /// Vertex shading normals.
     pub n: Option<[Vec3; 3]>,
@@ -304,7 +304,24 @@ impl Primitive {
     pub fn intersect(&self, ray: &Ray, tmin: f32, tmax: f32) -> Option<Hit> {
         let pre = RayPre::new(ray);
         self.intersect_raw(&pre, tmin, tmax)
-            .map(|h| self.finish(ray, &h))
+            .map(|h| self.finish(ray, &h, self.attrs()))
+    }
+
+    /// A triangle's own attributes, if it still holds them (see [`Primitive::take_attrs`]).
+    pub fn attrs(&self) -> Option<&TriangleAttrs> {
+        match self {
+            Primitive::Triangle { attrs, .. } => attrs.as_deref(),
+            _ => None,
+        }
+    }
+
+    /// Moves a triangle's attributes out, for a container that keeps them in an array of its
+    /// own and passes them to [`Primitive::finish`].
+    pub fn take_attrs(&mut self) -> Option<TriangleAttrs> {
+        match self {
+            Primitive::Triangle { attrs, .. } => attrs.take().map(|a| *a),
+            _ => None,
+        }
     }
 
     /// The intersection test proper: `t` in `(tmin, tmax)` and what [`Primitive::finish`] needs.
@@ -319,10 +336,11 @@ impl Primitive {
         }
     }
 
-    /// The hit record of an intersection this primitive reported for `ray`.
-    pub fn finish(&self, ray: &Ray, h: &RawHit) -> Hit {
+    /// The hit record of an intersection this primitive reported for `ray`; `attrs` are a
+    /// triangle's attributes, wherever they are kept ([`Primitive::attrs`] if it holds them).
+    pub fn finish(&self, ray: &Ray, h: &RawHit, attrs: Option<&TriangleAttrs>) -> Hit {
         match self {
-            Primitive::Triangle { p, attrs, shape } => {
+            Primitive::Triangle { p, shape, .. } => {
                 let det = h.a + h.b + h.c;
                 let inv = 1.0 / det;
                 let (b0, b1, b2) = (h.a * inv, h.b * inv, h.c * inv);
@@ -343,8 +361,8 @@ impl Primitive {
                     .try_normalize()
                     .or_else(|| triangle_normal(p))
                     .unwrap_or(Vec3::Z);
-                let normals = attrs.as_ref().and_then(|a| a.n.as_ref());
-                let uvs = attrs.as_ref().and_then(|a| a.uv.as_ref());
+                let normals = attrs.and_then(|a| a.n.as_ref());
+                let uvs = attrs.and_then(|a| a.uv.as_ref());
                 let uv = match uvs {
                     Some(uv) => uv[0] * b0 + uv[1] * b1 + uv[2] * b2,
                     None => Vec2::ZERO,
