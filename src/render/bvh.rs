@@ -98,7 +98,8 @@ impl Child {
 }
 
 /// A 4-wide node: the children's boxes as `[min x, min y, min z, max x, max y, max z]`, one
-/// lane per child, then the children. Two cache lines, aligned as a pair (Intel's L2 fetches a line's 128-byte buddy with it).
+/// lane per child, then the children. Two cache lines, aligned as a pair (Intel's L2 fetches
+/// a line's 128-byte buddy with it).
 #[derive(Debug, Clone, Copy)]
 #[repr(C, align(128))]
 struct Node4 {

@@ -172,11 +172,7 @@ impl Lights {
     /// `None` when the choice contributes nothing (back side, degenerate sample).
     #[inline]
     pub fn sample(&self, from: Vec3, u_choice: f32, u: Vec2) -> Option<LightSample> {
-        let n = self.area.len() + self.others.len();
-        if n == 0 {
-            return None;
-        }
-        let i = ((u_choice * n as f32) as usize).min(n - 1);
+        let i = self.choose(u_choice)?;
         let mut s = match self.area.get(i) {
             Some(light) => light.sample(from, u)?,
             None => self.others[i - self.area.len()].sample(from, u)?,
@@ -198,14 +194,18 @@ impl Lights {
     /// load overlaps the traversal. Only a hint; results do not depend on it.
     #[inline]
     pub fn prefetch(&self, u_choice: f32, u: Vec2) {
-        let n = self.area.len() + self.others.len();
-        let i = ((u_choice * n as f32) as usize).min(n.saturating_sub(1));
-        if let Some(other) = i
-            .checked_sub(self.area.len())
-            .and_then(|k| self.others.get(k))
-        {
+        let chosen = self.choose(u_choice);
+        if let Some(other) = chosen.and_then(|i| self.others.get(i.checked_sub(self.area.len())?)) {
             other.prefetch(u);
         }
+    }
+
+    /// The emitter `u_choice` picks, uniformly (area emitters first, then the others); `None`
+    /// when there is none.
+    #[inline]
+    fn choose(&self, u_choice: f32) -> Option<usize> {
+        let n = self.area.len() + self.others.len();
+        (n > 0).then(|| ((u_choice * n as f32) as usize).min(n - 1))
     }
 
     /// The incident radiance of a sample of [`Lights::sample`] and the density with which it
