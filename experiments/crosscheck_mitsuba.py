@@ -25,8 +25,9 @@ scenes the t statistic is only approximately t-distributed at small K.
 Speed: samples per second = width * height * spp / seconds, where seconds is the wall clock of
 the `mi.render` call alone for Mitsuba and the renderer's own `render_s` for ours (its `wall_s`
 less `build_s`, the BVH and emitter tables, which Mitsuba builds in `load_file`), summed over the
-seeds; both run on the same number of threads (`--threads`, default all cores). Both load
-times are reported beside them.
+seeds; both run on the same number of threads (`--threads`, default all cores), and they take
+turns seed by seed, so that a drift of the machine's speed during the run falls on both alike.
+Both load times are reported beside them.
 
 Scene copies and overrides. Some scenes cannot be given to both renderers as they are; the
 script then writes a modified copy of the XML next to the original (so that relative paths to
@@ -382,27 +383,36 @@ def rgb(array):
     return a[:, :, :3]
 
 
-def render_mitsuba(path: Path, spp: int, seeds: list) -> dict:
-    """Renders the scene once per seed; returns the images and the render-call timings."""
+def load_mitsuba(path: Path):
+    """Loads the scene into Mitsuba; returns it and the load time."""
+    import mitsuba as mi
+
+    start = time.perf_counter()
+    scene = mi.load_file(str(path))
+    return scene, time.perf_counter() - start
+
+
+def render_mitsuba(scene, spp: int, seed: int):
+    """One render of a loaded scene: its RGB image and the `mi.render` call's seconds."""
     import mitsuba as mi
     import numpy as np
 
     start = time.perf_counter()
-    scene = mi.load_file(str(path))
-    load_s = time.perf_counter() - start
-    images, seconds = [], []
-    for seed in seeds:
-        start = time.perf_counter()
-        result = mi.render(scene, spp=spp, seed=seed)
-        elapsed = time.perf_counter() - start
-        images.append(rgb(np.array(result)))
-        seconds.append(elapsed)
+    result = mi.render(scene, spp=spp, seed=seed)
+    elapsed = time.perf_counter() - start
+    return rgb(np.array(result)), elapsed
+
+
+def gather(images: list, seconds: list, spp: int, **extra) -> dict:
+    """The seeds' images stacked, with the summed render time as samples per second."""
+    import numpy as np
+
     height, width = images[0].shape[:2]
     return {
         "images": np.stack(images),
         "seconds": seconds,
-        "load_s": load_s,
-        "samples_per_s": width * height * spp * len(seeds) / sum(seconds),
+        "samples_per_s": width * height * spp * len(images) / sum(seconds),
+        **extra,
     }
 
 
@@ -414,51 +424,40 @@ class RenderFailed(RuntimeError):
         self.brief = brief
 
 
-def render_ours(binary: Path, path: Path, spp: int, seeds: list, threads: int,
+def render_ours(binary: Path, path: Path, spp: int, seed: int, threads: int,
                 extra_args: list = ()) -> dict:
-    """Runs `fireflies render` once per seed; returns the mean images and its own timings."""
+    """Runs `fireflies render` once; returns its image and what its `render.json` reports."""
     import mitsuba as mi
     import numpy as np
 
-    images, seconds, reported, invalid = [], [], [], 0
-    built, loaded = [], []
-    for seed in seeds:
-        with tempfile.TemporaryDirectory(prefix="fireflies-crosscheck-") as out:
-            cmd = [str(binary), "render", str(path), "--spp", str(spp), "--seed", str(seed),
-                   "--estimators", "mean", "--threads", str(threads), "--out", out,
-                   *extra_args]
-            done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                  text=True)
-            if done.returncode != 0:
-                lines = [ln for ln in done.stderr.strip().splitlines() if ln.strip()]
-                gist = lines[0] if lines else "(no message)"
-                raise RenderFailed(f"{' '.join(cmd)} exited {done.returncode}:\n"
-                                   f"{done.stderr.strip()}",
-                                   f"exit {done.returncode}: {shorten(gist)}")
-            exr = Path(out) / "mean.exr"
-            manifest = Path(out) / "render.json"
-            for needed in (exr, manifest):
-                if not needed.exists():
-                    raise RenderFailed(f"{' '.join(cmd)} wrote no {needed.name}",
-                                       f"wrote no {needed.name}")
-            images.append(rgb(np.array(mi.Bitmap(str(exr)))))
-            info = json.loads(manifest.read_text())
+    with tempfile.TemporaryDirectory(prefix="fireflies-crosscheck-") as out:
+        cmd = [str(binary), "render", str(path), "--spp", str(spp), "--seed", str(seed),
+               "--estimators", "mean", "--threads", str(threads), "--out", out,
+               *extra_args]
+        done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                              text=True)
+        if done.returncode != 0:
+            lines = [ln for ln in done.stderr.strip().splitlines() if ln.strip()]
+            gist = lines[0] if lines else "(no message)"
+            raise RenderFailed(f"{' '.join(cmd)} exited {done.returncode}:\n"
+                               f"{done.stderr.strip()}",
+                               f"exit {done.returncode}: {shorten(gist)}")
+        exr = Path(out) / "mean.exr"
+        manifest = Path(out) / "render.json"
+        for needed in (exr, manifest):
+            if not needed.exists():
+                raise RenderFailed(f"{' '.join(cmd)} wrote no {needed.name}",
+                                   f"wrote no {needed.name}")
+        info = json.loads(manifest.read_text())
+        return {
+            "image": rgb(np.array(mi.Bitmap(str(exr)))),
             # `render_s` since 2026-12-07; older binaries (`--binary`) report `wall_s` only.
-            seconds.append(float(info.get("render_s", info["wall_s"])))
-            built.append(float(info.get("build_s", 0.0)))
-            loaded.append(float(info.get("load_s", 0.0)))
-            reported.append(float(info["samples_per_s"]))
-            invalid += int(info.get("invalid_samples", 0))
-    height, width = images[0].shape[:2]
-    return {
-        "images": np.stack(images),
-        "seconds": seconds,
-        "samples_per_s": width * height * spp * len(seeds) / sum(seconds),
-        "reported_samples_per_s": reported,
-        "invalid_samples": invalid,
-        "load_s": loaded,
-        "build_s": built,
-    }
+            "seconds": float(info.get("render_s", info["wall_s"])),
+            "build_s": float(info.get("build_s", 0.0)),
+            "load_s": float(info.get("load_s", 0.0)),
+            "reported_samples_per_s": float(info["samples_per_s"]),
+            "invalid_samples": int(info.get("invalid_samples", 0)),
+        }
 
 
 # --- statistics --------------------------------------------------------------------------------
@@ -645,9 +644,24 @@ def compare(path: Path, mitsuba_path: Path, ours_path: Path, our_args: list, arg
     import numpy as np
 
     spp, seeds = row["spp"], list(range(row["seeds"]))
-    print(f"{row['scene']}: Mitsuba, {len(seeds)} x {spp} spp", file=sys.stderr)
+    # The renderers take turns, seed by seed, so that a change in the machine's speed during
+    # the run (this project's VM drifted by 25% within minutes) falls on both alike.
+    both = not args.mitsuba_only
+    who = "Mitsuba and fireflies in turn" if both else "Mitsuba"
+    print(f"{row['scene']}: {who}, {len(seeds)} x {spp} spp", file=sys.stderr)
+    m_images, m_seconds, runs, ours_error = [], [], [], None
     try:
-        mits = render_mitsuba(mitsuba_path, spp, seeds)
+        scene, load_s = load_mitsuba(mitsuba_path)
+        for seed in seeds:
+            image, elapsed = render_mitsuba(scene, spp, seed)
+            m_images.append(image)
+            m_seconds.append(elapsed)
+            if both and ours_error is None:
+                try:
+                    runs.append(render_ours(args.binary, ours_path, spp, seed, args.threads,
+                                            our_args))
+                except (RuntimeError, OSError, ValueError, KeyError) as e:
+                    ours_error = e
     except Exception as e:  # a scene Mitsuba cannot load must not hide the others
         message = unmask(f"{type(e).__name__}: {e}", mitsuba_path, path)
         row["error"] = message
@@ -655,6 +669,7 @@ def compare(path: Path, mitsuba_path: Path, ours_path: Path, our_args: list, arg
         row["error_brief"] = shorten(message)
         print(f"  {message}", file=sys.stderr)
         return row
+    mits = gather(m_images, m_seconds, spp, load_s=load_s)
     height, width = mits["images"].shape[1:3]
     row["size"] = [int(width), int(height)]
     row["mitsuba"] = {"samples_per_s": mits["samples_per_s"], "seconds": mits["seconds"],
@@ -664,20 +679,21 @@ def compare(path: Path, mitsuba_path: Path, ours_path: Path, our_args: list, arg
     stem = label(path).replace("/", "_").replace(".._", "").removesuffix(".xml")
     images = args.out / "images"
     write_image_atomic(images / f"{stem}.mitsuba.exr", mits["images"].mean(axis=0))
-    if args.mitsuba_only:
+    if not both:
         row["verdict"] = "Mitsuba only"
         return row
-
-    print(f"{row['scene']}: fireflies, {len(seeds)} x {spp} spp", file=sys.stderr)
-    try:
-        ours = render_ours(args.binary, ours_path, spp, seeds, args.threads, our_args)
-    except (RuntimeError, OSError, ValueError, KeyError) as e:
-        message = unmask(str(e), ours_path, path)
+    if ours_error is not None:
+        message = unmask(str(ours_error), ours_path, path)
         row["error"] = message
-        row["error_brief"] = shorten(unmask(getattr(e, "brief", message), ours_path, path))
+        row["error_brief"] = shorten(unmask(getattr(ours_error, "brief", message), ours_path,
+                                            path))
         row["verdict"] = "could not be rendered (ours)"
         print(f"  {message}", file=sys.stderr)
         return row
+    ours = gather([r["image"] for r in runs], [r["seconds"] for r in runs], spp,
+                  **{k: [r[k] for r in runs]
+                     for k in ("reported_samples_per_s", "load_s", "build_s")},
+                  invalid_samples=sum(r["invalid_samples"] for r in runs))
     row["ours"] = {k: ours[k] for k in
                    ("samples_per_s", "seconds", "reported_samples_per_s", "invalid_samples",
                     "load_s", "build_s")}
