@@ -335,9 +335,10 @@ mod tests {
     #[test]
     fn rgb_bank_shares_per_channel_and_agrees_with_estimators_fed_alone() {
         // The MoN family at M = 3 adopts the first one's three partitions, MoN at M = 5 Jung's
-        // third ones; Jung, Zirr and Pajot take the chunked channels or the RGB block. Blocks of every length around M and
-        // around the 64-sample chunk (a chunk shorter than M bypasses the sharing, and M = 300
-        // never shares) give every channel's estimate bit for bit as an estimator fed alone.
+        // third ones; Jung, Zirr and Pajot take the chunked channels or the RGB block. Blocks
+        // of every length around M and around the 64-sample chunk (a chunk shorter than M
+        // bypasses the sharing, and M = 300 never shares) give every channel's estimate bit for
+        // bit as an estimator fed alone.
         // (The bank does not check samples: its caller, the film, does.)
         let texts = [
             "gini:M=3",

@@ -326,11 +326,6 @@ impl Bvh {
         self.bounds
     }
 
-    /// The primitives, in the build's order.
-    pub fn primitives(&self) -> &[Primitive] {
-        &self.prims
-    }
-
     /// The closest hit with `t` in `(tmin, tmax)`.
     pub fn intersect(&self, ray: &Ray, tmin: f32, tmax: f32) -> Option<Hit> {
         let mut best: Option<(usize, RawHit)> = None;

@@ -19,7 +19,6 @@ use std::ops::{Deref, DerefMut};
 pub struct HugeTable<T> {
     /// `None` for an empty table (a mapping cannot be empty).
     map: Option<MmapMut>,
-    len: usize,
     items: PhantomData<T>,
 }
 
@@ -42,7 +41,6 @@ impl<T: Pod> HugeTable<T> {
         };
         Ok(HugeTable {
             map,
-            len,
             items: PhantomData,
         })
     }
@@ -59,7 +57,6 @@ impl<T> Default for HugeTable<T> {
     fn default() -> Self {
         HugeTable {
             map: None,
-            len: 0,
             items: PhantomData,
         }
     }
@@ -71,7 +68,8 @@ impl<T: Pod> Deref for HugeTable<T> {
     #[inline(always)]
     fn deref(&self) -> &[T] {
         match &self.map {
-            // A mapping is page-aligned and holds exactly `len` items, so the cast cannot fail.
+            // A mapping is page-aligned and a whole number of items long, so the cast cannot
+            // fail.
             Some(map) => bytemuck::cast_slice(&map[..]),
             None => &[],
         }
@@ -96,10 +94,12 @@ impl<T: Pod> Clone for HugeTable<T> {
     }
 }
 
-impl<T> fmt::Debug for HugeTable<T> {
+impl<T: Pod> fmt::Debug for HugeTable<T> {
     /// The length only: the contents run to megabytes.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("HugeTable").field("len", &self.len).finish()
+        f.debug_struct("HugeTable")
+            .field("len", &self.len())
+            .finish()
     }
 }
 

@@ -137,14 +137,14 @@ fn trace<const FEATURES: bool>(
     let mut awaiting_visibility = false;
 
     loop {
-        if lights.prefetches() && depth + 1 < max_depth {
-            // Tracing draws no numbers, so next-event estimation at the hit will draw the next
-            // three: read them ahead, so that an emitter can start loading the table entry its
-            // draw will read while the ray traverses the BVH.
-            let mut ahead = rng.clone();
-            let u_choice = ahead.next_1d();
-            lights.prefetch(u_choice, ahead.next_2d());
-        }
+        // Tracing draws no numbers, so next-event estimation's three may be drawn before the
+        // ray is traced, with the same stream: where an emitter prefetches, they are, so that
+        // it can start loading the table entry its draw will read during the traversal.
+        let drawn_ahead = (lights.prefetches() && depth + 1 < max_depth).then(|| {
+            let u = (rng.next_1d(), rng.next_2d());
+            lights.prefetch(u.0, u.1);
+            u
+        });
         let Some(hit) = world.bvh.intersect(&ray, tmin, tmax) else {
             if let Some((le, light_pdf)) = lights.environment(ray.d) {
                 let w = if prev_delta {
@@ -205,8 +205,7 @@ fn trace<const FEATURES: bool>(
         };
 
         // Next-event estimation.
-        let u_choice = rng.next_1d();
-        let u_light = rng.next_2d();
+        let (u_choice, u_light) = drawn_ahead.unwrap_or_else(|| (rng.next_1d(), rng.next_2d()));
         if bsdf.has_smooth_lobe() {
             let mut visible = false;
             if let Some(ls) = lights.sample(hit.p, u_choice, u_light) {
