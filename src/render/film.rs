@@ -4,7 +4,7 @@
 //!
 //! The render proceeds in passes between checkpoints. In each pass, rayon hands out rows; a
 //! pixel draws its samples `[s0, s1)` in order, each from its own stream
-//! ([`SampleStream`]), so the image does not depend on the number of threads or on the
+//! ([`SampleStream`](super::sampler::SampleStream)), so the image does not depend on the number of threads or on the
 //! checkpoints. After a pass, the image-wide per-channel sample σ (Jung's image mode, docs/estimators.md §4)
 //! is merged in row order and handed to every pixel before the estimates are read.
 //! Non-finite or negative radiance samples are counted and never pushed.
@@ -16,7 +16,8 @@
 
 use super::integrator::{Features, radiance, radiance_features};
 use super::nfor_buffers::{EstimatorHalves, HalfBuffer, NforBuffers};
-use super::sampler::SampleStream;
+use super::sampler::PixelStreams;
+use super::scene::Rgb;
 use super::world::World;
 use crate::error::{Error, Result};
 use crate::estimators::{EstimatorSpec, RgbBank, RgbEstimator, Welford, luminance};
@@ -504,8 +505,9 @@ fn render_row(
         let index = y as usize * width + x;
         samples.clear();
         let mut halves = nfor_row.as_deref_mut().map(|r| &mut r[x].halves);
+        let pixel_streams = PixelStreams::new(seed, index as u64);
         for s in s0..s1 {
-            let mut rng = SampleStream::new(seed, index as u64, u64::from(s));
+            let mut rng = pixel_streams.sample(u64::from(s));
             let (l, features) = if halves.is_some() {
                 let (l, f) = radiance_features(world, x as u32, y, &mut rng);
                 (l, Some(f))
@@ -513,7 +515,8 @@ fn render_row(
                 (radiance(world, x as u32, y, &mut rng), None)
             };
             let v = [f64::from(l.x), f64::from(l.y), f64::from(l.z)];
-            let valid = v.iter().all(|c| c.is_finite() && *c >= 0.0);
+            // On the f32 values, three lanes at once (widening keeps finiteness and sign).
+            let valid = l.is_finite() && l.cmpge(Rgb::ZERO).all();
             if valid {
                 samples.push(v);
             } else {

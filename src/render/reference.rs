@@ -4,7 +4,8 @@
 //!
 //! # Samples
 //!
-//! Sample `i` of pixel `p` is the film's: [`SampleStream::new`]`(seed, p, i)` through
+//! Sample `i` of pixel `p` is the film's:
+//! [`SampleStream::new`](super::sampler::SampleStream::new)`(seed, p, i)` through
 //! [`radiance`], NaN, infinite and negative samples counted and left out. A reference holds a
 //! set of disjoint ranges of sample indices; adding a range continues every pixel's
 //! accumulator sample by sample in index order, so tracing `[0, N)` then `[N, 2N)` gives the
@@ -23,7 +24,7 @@
 //! eight `f64` (means of R, G, B, luminance, then their M2), all little-endian.
 
 use super::integrator::radiance;
-use super::sampler::SampleStream;
+use super::sampler::PixelStreams;
 use super::world::World;
 use crate::error::{Error, Result};
 use crate::estimators::luminance;
@@ -364,9 +365,9 @@ impl Reference {
             .map(|(y, row)| {
                 let mut invalid = 0u64;
                 for (x, stats) in row.iter_mut().enumerate() {
-                    let pixel = (y * width + x) as u64;
+                    let streams = PixelStreams::new(seed, (y * width + x) as u64);
                     for s in samples.clone() {
-                        let mut rng = SampleStream::new(seed, pixel, s);
+                        let mut rng = streams.sample(s);
                         let l = radiance(world, x as u32, y as u32, &mut rng);
                         let v = [l.x, l.y, l.z].map(f64::from);
                         if v.iter().all(|c| c.is_finite() && *c >= 0.0) {

@@ -15,6 +15,31 @@ fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// The streams of one pixel's samples: the part of the key common to them mixed once, not
+/// once per sample.
+#[derive(Debug, Clone, Copy)]
+pub struct PixelStreams {
+    key: u64,
+}
+
+impl PixelStreams {
+    /// The streams of pixel `pixel` (row-major index) under `seed`.
+    #[inline]
+    pub fn new(seed: u64, pixel: u64) -> Self {
+        PixelStreams {
+            key: mix64(mix64(seed) ^ pixel),
+        }
+    }
+
+    /// [`SampleStream::new`]`(seed, pixel, index)`.
+    #[inline]
+    pub fn sample(&self, index: u64) -> SampleStream {
+        SampleStream {
+            rng: Xoshiro128PlusPlus::seed_from_u64(mix64(self.key ^ index)),
+        }
+    }
+}
+
 /// The stream of one camera sample; dimension `d` is the `d`-th number drawn from it.
 #[derive(Debug, Clone)]
 pub struct SampleStream {
@@ -25,10 +50,7 @@ impl SampleStream {
     /// The stream of sample `index` of pixel `pixel` (row-major index) under `seed`.
     #[inline]
     pub fn new(seed: u64, pixel: u64, index: u64) -> Self {
-        let key = mix64(mix64(mix64(seed) ^ pixel) ^ index);
-        SampleStream {
-            rng: Xoshiro128PlusPlus::seed_from_u64(key),
-        }
+        PixelStreams::new(seed, pixel).sample(index)
     }
 
     /// The next number, uniform on `[0, 1)` with 24 random bits (every value is exact in f32).
