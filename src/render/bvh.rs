@@ -6,8 +6,9 @@
 //! [`MAX_LEAF`]) are contiguous; the collapse then opens, in each 4-wide node, the binary
 //! child of largest area until four children remain. A child reference is an interior node's
 //! index or a leaf's primitive range ([`Child`]). Closest-hit traversal visits the children it
-//! hits nearest first; occlusion rays stop at the first hit. A leaf of two to four triangles
-//! is also kept as a [`TrianglePacket`] and tested in one go.
+//! hits nearest first; occlusion rays stop at the first hit (see [`Bvh::occluded`] for their
+//! order). A leaf of two to four triangles is also kept as a [`TrianglePacket`] and tested in
+//! one go.
 //!
 //! The slab test picks each axis' near and far plane by the sign bit of the direction, so a
 //! zero (or negative zero) component gives an infinite slab of the right sign; `0·∞ = NaN`
@@ -329,14 +330,26 @@ impl Bvh {
     /// The closest hit with `t` in `(tmin, tmax)`.
     pub fn intersect(&self, ray: &Ray, tmin: f32, tmax: f32) -> Option<Hit> {
         let mut best: Option<(usize, RawHit)> = None;
-        self.traverse::<false>(ray, tmin, tmax, &mut best);
+        self.traverse::<false, false>(ray, tmin, tmax, &mut best);
         best.map(|(i, h)| self.prims[i].finish(ray, &h, self.attrs.get(i)))
     }
 
     /// Whether anything is hit with `t` in `(tmin, tmax)` (stops at the first hit).
+    ///
+    /// The answer does not depend on the order in which boxes are visited, only the work does.
+    /// A ray without end (a shadow ray toward an environment map, or a sky) visits the farthest
+    /// boxes first: indoors such a ray is mostly stopped by the room's walls, not by what lies
+    /// near its origin. On the living room that visits 32% fewer nodes and 20% fewer leaves
+    /// than lane order (8 spp at 160x90); nearest-first visits 6% more. A ray toward a point
+    /// at a finite distance keeps lane order, the cheapest to pick (farthest-first visits 9%
+    /// more leaves on the Cornell box, whose shadow rays end at its light).
     pub fn occluded(&self, ray: &Ray, tmin: f32, tmax: f32) -> bool {
         let mut best = None;
-        self.traverse::<true>(ray, tmin, tmax, &mut best)
+        if tmax.is_infinite() {
+            self.traverse::<true, true>(ray, tmin, tmax, &mut best)
+        } else {
+            self.traverse::<true, false>(ray, tmin, tmax, &mut best)
+        }
     }
 
     /// Tests a leaf's primitives; with `ANY` returns at the first hit, otherwise keeps the
@@ -390,9 +403,10 @@ impl Bvh {
     }
 
     /// Walks the tree; with `ANY` returns at the first hit, otherwise keeps the closest in
-    /// `best`. Returns whether anything was hit.
+    /// `best`. Returns whether anything was hit. Boxes are visited nearest first, with
+    /// `FARTHEST_FIRST` farthest first, and with `ANY` alone in lane order.
     #[inline(always)]
-    fn traverse<const ANY: bool>(
+    fn traverse<const ANY: bool, const FARTHEST_FIRST: bool>(
         &self,
         ray: &Ray,
         tmin: f32,
@@ -422,7 +436,9 @@ impl Bvh {
                 let (t_near, mut mask) = tr.hit_boxes(n, tmin, t_best);
                 if mask != 0 {
                     let t = t_near.to_array();
-                    if ANY {
+                    // Whether a box entered at `a` is visited before one entered at `b`.
+                    let before = |a: f32, b: f32| if FARTHEST_FIRST { a > b } else { a < b };
+                    if ANY && !FARTHEST_FIRST {
                         // Any order will do: descend into the first, stack the others.
                         next = n.child[mask.trailing_zeros() as usize];
                         mask &= mask - 1;
@@ -441,32 +457,36 @@ impl Bvh {
                         continue;
                     }
                     if rest & (rest - 1) == 0 {
-                        // Two: the nearer first; on a tie the later lane, as the sort below.
+                        // Two: on a tie the later lane first, as the sort below.
                         let k1 = rest.trailing_zeros() as usize;
-                        let (near, far) = if t[k0] < t[k1] { (k0, k1) } else { (k1, k0) };
-                        stack.push((n.child[far], t[far]));
-                        next = n.child[near];
+                        let (first, second) = if before(t[k0], t[k1]) {
+                            (k0, k1)
+                        } else {
+                            (k1, k0)
+                        };
+                        stack.push((n.child[second], t[second]));
+                        next = n.child[first];
                         continue;
                     }
-                    // Nearest first: sort the three or four hits by entry distance, stack all
-                    // but the nearest farthest-first (among equal distances the later lane is
-                    // visited first).
+                    // Three or four: sort by entry distance so that the last is visited
+                    // first, visit it and stack the others (among equal distances the later
+                    // lane is visited first).
                     let mut hits: ArrayVec<(f32, Child), 4> = ArrayVec::new();
                     while mask != 0 {
                         let k = mask.trailing_zeros() as usize;
                         let mut j = hits.len();
                         hits.push((t[k], n.child[k]));
-                        while j > 0 && hits[j - 1].0 < hits[j].0 {
+                        while j > 0 && before(hits[j - 1].0, hits[j].0) {
                             hits.swap(j - 1, j);
                             j -= 1;
                         }
                         mask &= mask - 1;
                     }
-                    let (_, nearest) = hits.pop().expect("a hit");
+                    let (_, first) = hits.pop().expect("a hit");
                     for &(t, c) in &hits {
                         stack.push((c, t));
                     }
-                    next = nearest;
+                    next = first;
                     continue;
                 }
             }
