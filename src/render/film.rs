@@ -4,8 +4,8 @@
 //!
 //! The render proceeds in passes between checkpoints. In each pass, rayon hands out rows; a
 //! pixel draws its samples `[s0, s1)` in order, each from its own stream
-//! ([`SampleStream`](super::sampler::SampleStream)), so the image does not depend on the number of threads or on the
-//! checkpoints. After a pass, the image-wide per-channel sample σ (Jung's image mode, docs/estimators.md §4)
+//! ([`SampleStream`](super::sampler::SampleStream)), so the image does not depend on the
+//! number of threads or on the checkpoints. After a pass, the image-wide per-channel sample σ (Jung's image mode, docs/estimators.md §4)
 //! is merged in row order and handed to every pixel before the estimates are read.
 //! Non-finite or negative radiance samples are counted and never pushed.
 //!
@@ -14,10 +14,9 @@
 //! and features ([`super::nfor_buffers`] describes the outputs). Features come from the same
 //! path as the colour ([`radiance_features`]), so the full-render images do not change.
 
-use super::integrator::{Features, radiance, radiance_features};
+use super::integrator::{Features, pushable, radiance, radiance_features};
 use super::nfor_buffers::{EstimatorHalves, HalfBuffer, NforBuffers};
 use super::sampler::PixelStreams;
-use super::scene::Rgb;
 use super::world::World;
 use crate::error::{Error, Result};
 use crate::estimators::{EstimatorSpec, RgbBank, RgbEstimator, Welford, luminance};
@@ -514,18 +513,15 @@ fn render_row(
             } else {
                 (radiance(world, x as u32, y, &mut rng), None)
             };
-            let v = [f64::from(l.x), f64::from(l.y), f64::from(l.z)];
-            // On the f32 values, three lanes at once (widening keeps finiteness and sign).
-            let valid = l.is_finite() && l.cmpge(Rgb::ZERO).all();
-            if valid {
-                samples.push(v);
-            } else {
-                report.invalid += 1;
+            let v = pushable(l);
+            match v {
+                Some(v) => samples.push(v),
+                None => report.invalid += 1,
             }
             if let (Some(halves), Some(f)) = (halves.as_deref_mut(), features) {
                 let k = (s % 2) as usize;
                 let half = &mut halves[k];
-                if valid {
+                if let Some(v) = v {
                     half.color.push(&v);
                     half_samples[k].push(v);
                 }

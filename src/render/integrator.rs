@@ -93,6 +93,14 @@ impl Features {
     };
 }
 
+/// A radiance sample as the estimators take it, or `None` for one they never see: NaN,
+/// infinite or negative in a channel (callers count those). Checked on the three `f32` lanes
+/// at once; widening to `f64` keeps finiteness and sign.
+#[inline]
+pub fn pushable(l: Rgb) -> Option<[f64; 3]> {
+    (l.is_finite() && l.cmpge(Rgb::ZERO).all()).then(|| [l.x, l.y, l.z].map(f64::from))
+}
+
 /// The radiance of one camera sample of pixel `(x, y)`, drawn from `rng`.
 pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
     trace::<false>(world, x, y, rng).0

@@ -23,7 +23,7 @@
 //! seed, sample ranges, invalid samples), then per pixel in row-major order a `u64` count and
 //! eight `f64` (means of R, G, B, luminance, then their M2), all little-endian.
 
-use super::integrator::radiance;
+use super::integrator::{pushable, radiance};
 use super::sampler::PixelStreams;
 use super::world::World;
 use crate::error::{Error, Result};
@@ -368,12 +368,9 @@ impl Reference {
                     let streams = PixelStreams::new(seed, (y * width + x) as u64);
                     for s in samples.clone() {
                         let mut rng = streams.sample(s);
-                        let l = radiance(world, x as u32, y as u32, &mut rng);
-                        let v = [l.x, l.y, l.z].map(f64::from);
-                        if v.iter().all(|c| c.is_finite() && *c >= 0.0) {
-                            stats.push(v);
-                        } else {
-                            invalid += 1;
+                        match pushable(radiance(world, x as u32, y as u32, &mut rng)) {
+                            Some(v) => stats.push(v),
+                            None => invalid += 1,
                         }
                     }
                 }

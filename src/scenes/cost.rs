@@ -19,7 +19,7 @@
 
 use crate::error::Result;
 use crate::estimators::{EstimatorSpec, RgbEstimator, Welford, build_rgb};
-use crate::render::integrator::radiance;
+use crate::render::integrator::{pushable, radiance};
 use crate::render::sampler::SampleStream;
 use crate::render::world::World;
 
@@ -122,9 +122,7 @@ pub fn measure(
             (0..spp)
                 .filter_map(|s| {
                     let mut rng = SampleStream::new(seed, index, u64::from(s));
-                    let l = radiance(world, x, y, &mut rng);
-                    let v = [f64::from(l.x), f64::from(l.y), f64::from(l.z)];
-                    v.iter().all(|c| c.is_finite() && *c >= 0.0).then_some(v)
+                    pushable(radiance(world, x, y, &mut rng))
                 })
                 .collect()
         })

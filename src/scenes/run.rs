@@ -11,7 +11,7 @@ use crate::image::Image;
 use crate::image::metrics::{FireflyRule, Metrics, display_luma};
 use crate::limits::MemoryLimit;
 use crate::render::film::{self, FilmConfig};
-use crate::render::integrator::radiance;
+use crate::render::integrator::{pushable, radiance};
 use crate::render::mitsuba;
 use crate::render::reference::{REFERENCE_SEED, Reference, SceneKey, scene_hash, sidecar};
 use crate::render::sampler::SampleStream;
@@ -296,9 +296,7 @@ pub fn delayed_fractions(
                 let index = u64::from(y) * u64::from(width) + u64::from(x);
                 for s in 0..spp {
                     let mut rng = SampleStream::new(seed, index, u64::from(s));
-                    let l = radiance(world, x, y, &mut rng);
-                    let v = [f64::from(l.x), f64::from(l.y), f64::from(l.z)];
-                    if v.iter().all(|c| c.is_finite() && *c >= 0.0) {
+                    if let Some(v) = pushable(radiance(world, x, y, &mut rng)) {
                         valid += 1;
                         let lum = luminance(v);
                         for e in &mut ests {

@@ -32,7 +32,7 @@ use crate::harness::law;
 use crate::harness::metrics::{CellAccumulator, Interval, Metric, Moments, Observation};
 use crate::harness::{Experiment, RunOptions, run};
 use crate::limits::{MemoryLimit, shorten};
-use crate::render::integrator::radiance;
+use crate::render::integrator::{pushable, radiance};
 use crate::render::mitsuba;
 use crate::render::sampler::SampleStream;
 use crate::render::world::World;
@@ -487,11 +487,7 @@ impl ScenePixel {
 impl PixelSource for ScenePixel {
     fn sample(&self, seed: u64, index: u64) -> Option<f64> {
         let mut rng = SampleStream::new(seed, self.index, index);
-        let l = radiance(&self.world, self.x, self.y, &mut rng);
-        let v = [f64::from(l.x), f64::from(l.y), f64::from(l.z)];
-        v.iter()
-            .all(|c| c.is_finite() && *c >= 0.0)
-            .then(|| luminance(v))
+        pushable(radiance(&self.world, self.x, self.y, &mut rng)).map(luminance)
     }
 }
 
