@@ -1,9 +1,10 @@
 //! Runs inner loops with the widest vector units the CPU has: NFOR's NL-means distances and
 //! regression, and the samplers' pass of `exp` (`dist::exp`).
 //!
-//! The release build targets baseline x86-64 (SSE2), so that one binary runs everywhere; those
-//! loops are written to vectorise, and NFOR's gain 1.4x from AVX2 alone (measured on
-//! living-room, `-C target-cpu=x86-64-v3` against baseline). [`vectorized`] compiles its job
+//! The build targets the building machine's CPU (`.cargo/config.toml`), but a binary built for
+//! baseline x86-64 (SSE2; `RUSTFLAGS` replaces those flags) must still use the wider units
+//! where they exist: those loops are written to vectorise, and NFOR's gain 1.4x from AVX2 alone
+//! (measured on living-room, `-C target-cpu=x86-64-v3` against baseline). [`vectorized`] compiles its job
 //! once per instruction set (baseline, AVX2+FMA, AVX-512 on x86-64; NEON on aarch64) and picks
 //! one at run time through `pulp`, which keeps the crate free of `unsafe`. Everything the job
 //! should speed up must be inlined into it (`#[inline(always)]`).

@@ -1,27 +1,25 @@
-//! A bounding volume hierarchy over [`Primitive`]s: a binned SAH binary build, collapsed into a
-//! 4-wide tree whose nodes hold their children's boxes as structure-of-arrays, so that one
-//! SSE2 operation per plane tests all four (glam's `Vec4`, baseline x86-64, no `unsafe`).
+//! A bounding volume hierarchy over [`Primitive`]s: a binned SAH binary build, collapsed into an
+//! 8-wide tree whose nodes hold their children's boxes as structure-of-arrays, tested eight at
+//! a time ([`super::slab`]: one AVX operation per step, two SSE2 ones where the build has no
+//! AVX).
 //!
 //! Layout: the binary build reorders the primitives so that every leaf's (at most
-//! [`MAX_LEAF`]) are contiguous; the collapse then opens, in each 4-wide node, the binary
-//! child of largest area until four children remain. A child reference is an interior node's
+//! [`MAX_LEAF`]) are contiguous; the collapse then opens, in each 8-wide node, the binary
+//! child of largest area until eight children remain. A child reference is an interior node's
 //! index or a leaf's primitive range ([`Child`]). Closest-hit traversal visits the children it
 //! hits nearest first; occlusion rays stop at the first hit (see [`Bvh::occluded`] for their
 //! order). A leaf of two to four triangles is also kept as a [`TrianglePacket`] and tested in
 //! one go.
 //!
-//! The slab test picks each axis' near and far plane by the sign bit of the direction, so a
-//! zero (or negative zero) component gives an infinite slab of the right sign; `0·∞ = NaN`
-//! only arises when the origin lies on a plane parallel to the ray, and such a lane is then
-//! treated as unconstrained (the ray runs inside the closed slab). The far distance is enlarged
-//! by `1 + 2γ₃` (Ize 2013) so rounding cannot cull a box whose primitive the watertight
-//! triangle test would hit.
+//! Why eight: a node of eight costs about what a node of four did (the same steps on twice the
+//! lanes), and a ray visits fewer nodes; README's "Speed" section has the measurements.
 
 use super::prefetch::prefetch;
 use super::shapes::packet::{PacketHit, TrianglePacket};
 use super::shapes::{Hit, Primitive, RawHit, Ray, RayPre, TriangleAttrs};
+use super::slab::{Lanes, SlabRay, WIDTH};
 use arrayvec::ArrayVec;
-use glam::{Vec3, Vec4};
+use glam::Vec3;
 
 /// Largest number of primitives in a leaf.
 pub const MAX_LEAF: usize = 4;
@@ -37,13 +35,9 @@ const TRAVERSAL_COST: f32 = 1.0;
 const MEDIAN_DEPTH: usize = 64;
 
 /// Traversal stack size: the median splits below [`MEDIAN_DEPTH`] halve the count, so at most
-/// 32 more binary levels follow; a 4-wide node spans at least one of them and stacks at most
-/// three children.
-const STACK: usize = 3 * (MEDIAN_DEPTH + 40);
-
-/// `1 + 2γ₃` with `γₙ = nε/(1 − nε)`, `ε` half an ulp of one.
-const FAR_SCALE: f32 =
-    1.0 + 2.0 * (3.0 * (f32::EPSILON * 0.5)) / (1.0 - 3.0 * (f32::EPSILON * 0.5));
+/// 32 more binary levels follow; a node spans at least one of them and stacks at most
+/// `WIDTH - 1` children.
+const STACK: usize = (WIDTH - 1) * (MEDIAN_DEPTH + 40);
 
 /// One node of the binary build: bounds, then for a leaf the first primitive and the count,
 /// for an interior node the index of the second child and a count of 0.
@@ -54,7 +48,7 @@ struct Node {
     count: u32,
 }
 
-/// A child reference of a 4-wide node: an interior node's index, or (top bit set) a leaf: with
+/// A child reference of a wide node: an interior node's index, or (top bit set) a leaf: with
 /// the next bit set the index of its [`Packet`], else its first primitive shifted left by 3
 /// and its count in the low 3 bits. [`Child::EMPTY`] fills unused slots (whose boxes are
 /// empty, so no ray reaches them).
@@ -98,17 +92,17 @@ impl Child {
     }
 }
 
-/// A 4-wide node: the children's boxes as `[min x, min y, min z, max x, max y, max z]`, one
-/// lane per child, then the children. Two cache lines, aligned as a pair (Intel's L2 fetches
+/// A wide node: the children's boxes as `[min x, min y, min z, max x, max y, max z]`, one
+/// lane per child, then the children. Four cache lines, aligned as pairs (Intel's L2 fetches
 /// a line's 128-byte buddy with it).
 #[derive(Debug, Clone, Copy)]
 #[repr(C, align(128))]
-struct Node4 {
-    planes: [Vec4; 6],
-    child: [Child; 4],
+struct WideNode {
+    planes: [Lanes; 6],
+    child: [Child; WIDTH],
 }
 
-const _: () = assert!(std::mem::size_of::<Node4>() == 128);
+const _: () = assert!(std::mem::size_of::<WideNode>() == 256);
 
 /// A leaf of two to four triangles: their vertices lane by lane, and where they are in the
 /// primitive array (for the hit record, and for the scalar test when the packet is unsure).
@@ -118,11 +112,11 @@ struct Packet {
     first: u32,
 }
 
-/// The acceleration structure: 4-wide nodes (the root first) over a flat, reordered
+/// The acceleration structure: wide nodes (the root first) over a flat, reordered
 /// primitive array.
 #[derive(Debug, Clone, Default)]
 pub struct Bvh {
-    nodes: Vec<Node4>,
+    nodes: Vec<WideNode>,
     packets: Vec<Packet>,
     /// Set when everything is one leaf (then `nodes` is empty).
     root_leaf: Option<Child>,
@@ -176,72 +170,6 @@ impl Aabb {
     fn half_area(&self) -> f32 {
         let d = (self.hi - self.lo).max(Vec3::ZERO);
         d.x * d.y + d.y * d.z + d.z * d.x
-    }
-}
-
-/// Per-ray traversal data (the triangle test's [`RayPre`] is made only when a leaf is
-/// reached: many rays, such as camera rays past a small object, never reach one).
-struct Trav {
-    o: [Vec4; 3],
-    inv: [Vec4; 3],
-    /// Per axis, the index in [`Node4::planes`] of the near plane (the max when the direction
-    /// is negative: sign bit, so −0 counts) and of the far plane.
-    near: [usize; 3],
-    far: [usize; 3],
-}
-
-impl Trav {
-    #[inline]
-    fn new(ray: &Ray) -> Trav {
-        let inv = Vec3::ONE / ray.d;
-        let neg = |a: usize| usize::from(inv[a].is_sign_negative()) * 3;
-        Trav {
-            o: [0, 1, 2].map(|a| Vec4::splat(ray.o[a])),
-            inv: [0, 1, 2].map(|a| Vec4::splat(inv[a])),
-            near: [0, 1, 2].map(|a| a + neg(a)),
-            far: [0, 1, 2].map(|a| a + 3 - neg(a)),
-        }
-    }
-
-    /// The four children's entry distances, and a bit mask of those the ray overlaps within
-    /// `[tmin, tmax]`.
-    #[inline(always)]
-    fn hit_boxes(&self, n: &Node4, tmin: f32, tmax: f32) -> (Vec4, u32) {
-        let mut t_near = Vec4::splat(tmin);
-        let mut t_far = Vec4::INFINITY;
-        for a in 0..3 {
-            let near = (n.planes[self.near[a]] - self.o[a]) * self.inv[a];
-            let far = (n.planes[self.far[a]] - self.o[a]) * self.inv[a];
-            // A NaN lane (0·∞: the origin on a plane parallel to the ray) constrains nothing.
-            t_near = max_or_keep(near, t_near);
-            t_far = min_or_keep(far, t_far);
-        }
-        let t_far = (t_far * Vec4::splat(FAR_SCALE)).min(Vec4::splat(tmax));
-        (t_near, t_near.cmple(t_far).bitmask())
-    }
-}
-
-/// Per lane `x` where `x > keep`, else `keep` (also where `x` is NaN).
-///
-/// On x86-64 that is SSE's `maxps(x, keep)`, one instruction (it returns its second operand
-/// when either is NaN, and for equal values); elsewhere (NEON's max propagates NaN) a compare
-/// and a select.
-#[inline(always)]
-fn max_or_keep(x: Vec4, keep: Vec4) -> Vec4 {
-    if cfg!(target_arch = "x86_64") {
-        x.max(keep)
-    } else {
-        Vec4::select(x.cmpgt(keep), x, keep)
-    }
-}
-
-/// Per lane `x` where `x < keep`, else `keep` (also where `x` is NaN); see [`max_or_keep`].
-#[inline(always)]
-fn min_or_keep(x: Vec4, keep: Vec4) -> Vec4 {
-    if cfg!(target_arch = "x86_64") {
-        x.min(keep)
-    } else {
-        Vec4::select(x.cmplt(keep), x, keep)
     }
 }
 
@@ -420,7 +348,7 @@ impl Bvh {
         if let Some(leaf) = self.root_leaf {
             return self.leaf::<ANY>(leaf, &RayPre::new(ray), tmin, &mut t_best, best);
         }
-        let tr = Trav::new(ray);
+        let slab = SlabRay::new(ray.o, ray.d);
         let mut pre: Option<RayPre> = None;
         // ArrayVec: no zero-fill of the whole stack on every ray.
         let mut stack: ArrayVec<(Child, f32), STACK> = ArrayVec::new();
@@ -433,9 +361,8 @@ impl Bvh {
                 }
             } else {
                 let n = &self.nodes[next.0 as usize];
-                let (t_near, mut mask) = tr.hit_boxes(n, tmin, t_best);
+                let (t, mut mask) = slab.hit(&n.planes, tmin, t_best);
                 if mask != 0 {
-                    let t = t_near.to_array();
                     // Whether a box entered at `a` is visited before one entered at `b`.
                     let before = |a: f32, b: f32| if FARTHEST_FIRST { a > b } else { a < b };
                     if ANY && !FARTHEST_FIRST {
@@ -468,10 +395,10 @@ impl Bvh {
                         next = n.child[first];
                         continue;
                     }
-                    // Three or four: sort by entry distance so that the last is visited
+                    // Three or more: sort by entry distance so that the last is visited
                     // first, visit it and stack the others (among equal distances the later
                     // lane is visited first).
-                    let mut hits: ArrayVec<(f32, Child), 4> = ArrayVec::new();
+                    let mut hits: ArrayVec<(f32, Child), WIDTH> = ArrayVec::new();
                     while mask != 0 {
                         let k = mask.trailing_zeros() as usize;
                         let mut j = hits.len();
@@ -525,13 +452,13 @@ fn pack(leaf: Child, prims: &[Primitive], packets: &mut Vec<Packet>) -> Child {
     Child::packet(packets.len() - 1)
 }
 
-/// Appends the 4-wide node of the binary interior node `b` (and, after it, its subtrees);
-/// returns its index. Opens the binary child of largest area until four children remain.
-fn collapse(binary: &[Node], b: usize, out: &mut Vec<Node4>) -> u32 {
-    let mut kids: ArrayVec<usize, 4> = ArrayVec::new();
+/// Appends the wide node of the binary interior node `b` (and, after it, its subtrees);
+/// returns its index. Opens the binary child of largest area until `WIDTH` children remain.
+fn collapse(binary: &[Node], b: usize, out: &mut Vec<WideNode>) -> u32 {
+    let mut kids: ArrayVec<usize, WIDTH> = ArrayVec::new();
     kids.push(b + 1);
     kids.push(binary[b].offset as usize);
-    while kids.len() < 4 {
+    while kids.len() < WIDTH {
         let area = |i: usize| {
             let n = &binary[i];
             Aabb {
@@ -550,30 +477,33 @@ fn collapse(binary: &[Node], b: usize, out: &mut Vec<Node4>) -> u32 {
         kids[k] = i + 1;
         kids.insert(k + 1, binary[i].offset as usize);
     }
+    // Unused slots keep empty boxes (min +∞, max −∞), which no ray enters.
+    let mut planes = [[f32::INFINITY; WIDTH]; 6];
+    for max in &mut planes[3..] {
+        *max = [f32::NEG_INFINITY; WIDTH];
+    }
+    let mut child = [Child::EMPTY; WIDTH];
     let me = out.len();
-    out.push(Node4 {
-        planes: [
-            Vec4::INFINITY,
-            Vec4::INFINITY,
-            Vec4::INFINITY,
-            Vec4::NEG_INFINITY,
-            Vec4::NEG_INFINITY,
-            Vec4::NEG_INFINITY,
-        ],
-        child: [Child::EMPTY; 4],
+    out.push(WideNode {
+        planes: planes.map(Lanes::new),
+        child,
     });
     for (k, &i) in kids.iter().enumerate() {
         let n = &binary[i];
         for a in 0..3 {
-            out[me].planes[a][k] = n.bounds[0][a];
-            out[me].planes[a + 3][k] = n.bounds[1][a];
+            planes[a][k] = n.bounds[0][a];
+            planes[a + 3][k] = n.bounds[1][a];
         }
-        out[me].child[k] = if n.count > 0 {
+        child[k] = if n.count > 0 {
             Child::leaf(n.offset as usize, n.count as usize)
         } else {
             Child(collapse(binary, i, out))
         };
     }
+    out[me] = WideNode {
+        planes: planes.map(Lanes::new),
+        child,
+    };
     me as u32
 }
 

@@ -25,6 +25,7 @@ pub mod sampler;
 pub mod sampling;
 pub mod scene;
 pub mod shapes;
+pub mod slab;
 pub mod textures;
 pub mod world;
 
