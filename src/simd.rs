@@ -1,18 +1,20 @@
 //! Runs inner loops with the widest vector units the CPU has: NFOR's NL-means distances and
 //! regression, and the samplers' pass of `exp` (`dist::exp`).
 //!
-//! The build targets the building machine's CPU (`.cargo/config.toml`), but a binary built for
-//! baseline x86-64 (SSE2; `RUSTFLAGS` replaces those flags) must still use the wider units
-//! where they exist: those loops are written to vectorise, and NFOR's gain 1.4x from AVX2 alone
-//! (measured on living-room, `-C target-cpu=x86-64-v3` against baseline). [`vectorized`] compiles its job
-//! once per instruction set (baseline, AVX2+FMA, AVX-512 on x86-64; NEON on aarch64) and picks
-//! one at run time through `pulp`, which keeps the crate free of `unsafe`. Everything the job
-//! should speed up must be inlined into it (`#[inline(always)]`).
+//! The build targets x86-64-v3 (AVX2, FMA; `.cargo/config.toml`), but these loops are also
+//! run in binaries built for baseline x86-64 (SSE2; `RUSTFLAGS` replaces those flags), and
+//! AVX-512 is only ever chosen here, at run time. The loops are written to vectorise, and NFOR
+//! gains 1.4x from AVX2 alone (measured on living-room, `-C target-cpu=x86-64-v3` against
+//! baseline). [`vectorized`] compiles its job once per instruction set (baseline, AVX2+FMA,
+//! AVX-512 on x86-64; NEON on aarch64) and picks one at run time through `pulp`, which keeps
+//! the crate free of `unsafe`. Everything the job should speed up must be inlined into it
+//! (`#[inline(always)]`).
 //!
 //! Results do not depend on the choice: Rust never fuses a multiply and an add on its own, and
 //! the loops fix their summation order in code (several running sums, then their sum in order),
 //! so wider registers compute the same operations in the same order. `FIREFLIES_SIMD=scalar`
-//! forces the baseline path, as does [`force_scalar`]; `tests/denoise.rs` and `dist::exp`'s
+//! forces the path without run-time choice (the build's own instruction set), as does
+//! [`force_scalar`]; `tests/denoise.rs` and `dist::exp`'s
 //! tests check that both give the same bits.
 
 use std::sync::OnceLock;

@@ -1,6 +1,6 @@
 //! The slab test of one BVH node's eight child boxes, eight lanes at once (`wide::f32x8`: one
-//! AVX operation per step when the build targets AVX, as `.cargo/config.toml` asks for the
-//! building machine's CPU; two SSE2 operations otherwise).
+//! AVX operation per step when the build targets AVX, as `.cargo/config.toml` asks for on
+//! x86-64; two SSE2 operations otherwise).
 //!
 //! Each axis' near and far plane is picked by the sign bit of the direction, so a zero (or
 //! negative zero) component gives an infinite slab of the right sign; `0·∞ = NaN` only arises
@@ -166,12 +166,16 @@ mod tests {
                     "case {case} lane {k}: o {o}, d {d}, box {lo} {hi}, tmax {tmax}"
                 );
                 hits += u32::from(want_hit);
-                nan_lanes += u32::from((0..3).any(|a| {
-                    d[a] == 0.0 && (lo[a] == o[a] || hi[a] == o[a])
-                }));
+                nan_lanes +=
+                    u32::from((0..3).any(|a| d[a] == 0.0 && (lo[a] == o[a] || hi[a] == o[a])));
             }
         }
-        // Both verdicts and the NaN case must occur for the comparison to mean anything.
-        assert!(hits > 10_000 && nan_lanes > 1_000, "hits {hits}, NaN lanes {nan_lanes}");
+        // Both verdicts and the NaN case must occur for the comparison to mean anything (with
+        // this seed: 3611 lanes entered, 17 565 lanes with an origin on a plane parallel to the
+        // ray, of 160 000).
+        assert!(
+            hits > 1_000 && nan_lanes > 1_000,
+            "hits {hits}, NaN lanes {nan_lanes}"
+        );
     }
 }
