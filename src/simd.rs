@@ -14,8 +14,8 @@
 //! the loops fix their summation order in code (several running sums, then their sum in order),
 //! so wider registers compute the same operations in the same order. `FIREFLIES_SIMD=scalar`
 //! forces the path without run-time choice (the build's own instruction set), as does
-//! [`force_scalar`]; `tests/denoise.rs` and `dist::exp`'s
-//! tests check that both give the same bits.
+//! [`force_scalar`]; `tests/denoise.rs` and `dist::exp`'s tests check that both give the same
+//! bits.
 
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, Ordering};

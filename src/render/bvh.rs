@@ -361,8 +361,9 @@ impl Bvh {
                 }
             } else {
                 let n = &self.nodes[next.0 as usize];
-                let (t, mut mask) = slab.hit(&n.planes, tmin, t_best);
+                let (t_near, mut mask) = slab.hit(&n.planes, tmin, t_best);
                 if mask != 0 {
+                    let t = t_near.to_array();
                     // Whether a box entered at `a` is visited before one entered at `b`.
                     let before = |a: f32, b: f32| if FARTHEST_FIRST { a > b } else { a < b };
                     if ANY && !FARTHEST_FIRST {

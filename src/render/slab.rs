@@ -46,9 +46,10 @@ impl SlabRay {
     }
 
     /// The eight entry distances, and a bit mask of the boxes the ray overlaps within
-    /// `[tmin, tmax]`. A slot whose box is empty (min +∞, max −∞) is never entered.
+    /// `[tmin, tmax]`. A slot whose box is empty (min +∞, max −∞) is never entered. The
+    /// distances stay in a register: most nodes are missed, and only a hit reads them.
     #[inline(always)]
-    pub fn hit(&self, planes: &[Lanes; 6], tmin: f32, tmax: f32) -> ([f32; WIDTH], u32) {
+    pub fn hit(&self, planes: &[Lanes; 6], tmin: f32, tmax: f32) -> (Lanes, u32) {
         let mut t_near = Lanes::splat(tmin);
         let mut t_far = Lanes::splat(f32::INFINITY);
         for a in 0..3 {
@@ -58,7 +59,7 @@ impl SlabRay {
             t_far = min_or_keep(far, t_far);
         }
         let t_far = (t_far * Lanes::splat(FAR_SCALE)).fast_min(Lanes::splat(tmax));
-        (t_near.to_array(), t_near.simd_le(t_far).to_bitmask())
+        (t_near, t_near.simd_le(t_far).to_bitmask())
     }
 }
 
@@ -156,6 +157,7 @@ mod tests {
             );
             let (tmin, tmax) = (0.0, [f32::INFINITY, 1.5, 0.25][case % 3]);
             let (t, mask) = SlabRay::new(o, d).hit(&coords.map(Lanes::new), tmin, tmax);
+            let t = t.to_array();
             for k in 0..WIDTH {
                 let lo = Vec3::new(coords[0][k], coords[1][k], coords[2][k]);
                 let hi = Vec3::new(coords[3][k], coords[4][k], coords[5][k]);
