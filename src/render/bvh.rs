@@ -256,6 +256,7 @@ impl Bvh {
     }
 
     /// The closest hit with `t` in `(tmin, tmax)`.
+    #[inline]
     pub fn intersect(&self, ray: &Ray, tmin: f32, tmax: f32) -> Option<Hit> {
         let mut best: Option<(usize, RawHit)> = None;
         self.traverse::<false, false>(ray, tmin, tmax, &mut best);

@@ -102,6 +102,7 @@ pub fn pushable(l: Rgb) -> Option<[f64; 3]> {
 }
 
 /// The radiance of one camera sample of pixel `(x, y)`, drawn from `rng`.
+#[inline]
 pub fn radiance(world: &World, x: u32, y: u32, rng: &mut SampleStream) -> Rgb {
     trace::<false>(world, x, y, rng).0
 }
