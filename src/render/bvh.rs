@@ -127,6 +127,8 @@ pub struct Bvh {
     /// the primitive and, after it, for the box; here both addresses are known at the hit, and
     /// both are prefetched while the traversal goes on.
     attrs: Vec<TriangleAttrs>,
+    /// Whether hits carry `dp_du`, `dp_dv` ([`Bvh::set_tangents`]).
+    tangents: bool,
 }
 
 /// A primitive's box and centroid during the build.
@@ -237,7 +239,14 @@ impl Bvh {
             bounds,
             prims,
             attrs,
+            tangents: true,
         }
+    }
+
+    /// Whether [`Bvh::intersect`]'s hits carry the tangents `dp_du`, `dp_dv` (they do unless
+    /// turned off; left zero, they save their computation at every hit).
+    pub fn set_tangents(&mut self, on: bool) {
+        self.tangents = on;
     }
 
     /// Number of primitives.
@@ -260,7 +269,7 @@ impl Bvh {
     pub fn intersect(&self, ray: &Ray, tmin: f32, tmax: f32) -> Option<Hit> {
         let mut best: Option<(usize, RawHit)> = None;
         self.traverse::<false, false>(ray, tmin, tmax, &mut best);
-        best.map(|(i, h)| self.prims[i].finish(ray, &h, self.attrs.get(i)))
+        best.map(|(i, h)| self.prims[i].finish(ray, &h, self.attrs.get(i), self.tangents))
     }
 
     /// Whether anything is hit with `t` in `(tmin, tmax)` (stops at the first hit).

@@ -30,10 +30,12 @@ impl World {
         for (i, shape) in scene.shapes.iter().enumerate() {
             prims.extend(primitives(i as u32, &shape.geometry));
         }
-        let bvh = Bvh::build(prims);
+        let mut bvh = Bvh::build(prims);
+        let bsdfs: Vec<Arc<dyn Bsdf>> = scene.shapes.iter().map(|s| s.bsdf.clone()).collect();
+        bvh.set_tangents(bsdfs.iter().any(|b| b.reads_tangents()));
         World {
             bvh,
-            bsdfs: scene.shapes.iter().map(|s| s.bsdf.clone()).collect(),
+            bsdfs,
             lights: Lights::new(scene),
             camera: Camera::new(&scene.camera),
             integrator: scene.integrator,

@@ -181,6 +181,10 @@ impl Bsdf for BumpMap {
         true
     }
 
+    fn reads_tangents(&self) -> bool {
+        true
+    }
+
     fn transmits(&self) -> bool {
         self.nested.transmits()
     }

@@ -60,6 +60,10 @@ impl Bsdf for Mask {
         self.opacity.is_textured() || self.nested.uses_uv()
     }
 
+    fn reads_tangents(&self) -> bool {
+        self.nested.reads_tangents()
+    }
+
     /// `opacity` times the nested albedo: the pass-through reflects nothing.
     fn albedo(&self, at: &SurfacePoint) -> Rgb {
         self.nested.albedo(at) * self.opacity(at)

@@ -53,6 +53,10 @@ impl Bsdf for TwoSided {
         self.0.uses_uv()
     }
 
+    fn reads_tangents(&self) -> bool {
+        self.0.reads_tangents()
+    }
+
     fn is_twosided(&self) -> bool {
         true
     }

@@ -65,7 +65,8 @@ pub struct Hit {
     /// Texture coordinates (interpolated on meshes that have them, else `(0, 0)`).
     pub uv: Vec2,
     /// World-space `∂p/∂u` as Mitsuba defines it: from the uv parametrisation on triangles
-    /// with texture coordinates ([`uv_tangents`]), else a tangent of `ng`.
+    /// with texture coordinates ([`uv_tangents`]), else a tangent of `ng`; zero when the hit
+    /// was finished without tangents ([`Primitive::finish`]).
     pub dp_du: Vec3,
     /// World-space `∂p/∂v` (likewise).
     pub dp_dv: Vec3,
@@ -304,7 +305,7 @@ impl Primitive {
     pub fn intersect(&self, ray: &Ray, tmin: f32, tmax: f32) -> Option<Hit> {
         let pre = RayPre::new(ray);
         self.intersect_raw(&pre, tmin, tmax)
-            .map(|h| self.finish(ray, &h, self.attrs()))
+            .map(|h| self.finish(ray, &h, self.attrs(), true))
     }
 
     /// A triangle's own attributes, if it still holds them (see [`Primitive::take_attrs`]).
@@ -338,7 +339,14 @@ impl Primitive {
 
     /// The hit record of an intersection this primitive reported for `ray`; `attrs` are a
     /// triangle's attributes, wherever they are kept ([`Primitive::attrs`] if it holds them).
-    pub fn finish(&self, ray: &Ray, h: &RawHit, attrs: Option<&TriangleAttrs>) -> Hit {
+    /// Without `tangents`, `dp_du` and `dp_dv` are left zero.
+    pub fn finish(
+        &self,
+        ray: &Ray,
+        h: &RawHit,
+        attrs: Option<&TriangleAttrs>,
+        tangents: bool,
+    ) -> Hit {
         match self {
             Primitive::Triangle { p, shape, .. } => {
                 let det = h.a + h.b + h.c;
@@ -369,9 +377,10 @@ impl Primitive {
                 };
                 // Derived here, per hit, rather than stored per triangle: two more vectors for
                 // each of a scene's 10^5 triangles would cost more memory than they save time.
-                let (dp_du, dp_dv) = uvs
-                    .and_then(|uv| uv_tangents(p, uv))
-                    .unwrap_or_else(|| tangents_of(ng));
+                let (dp_du, dp_dv) = tangents_if(tangents, || {
+                    uvs.and_then(|uv| uv_tangents(p, uv))
+                        .unwrap_or_else(|| tangents_of(ng))
+                });
                 let ns = match normals {
                     Some(n) => match (n[0] * b0 + n[1] * b1 + n[2] * b2).try_normalize() {
                         Some(s) if s.dot(ng) < 0.0 => -s,
@@ -405,7 +414,7 @@ impl Primitive {
                 };
                 // Project onto the surface: the normal is exact and the point on the sphere.
                 let ng = q.try_normalize().unwrap_or(Vec3::Z);
-                let (dp_du, dp_dv) = tangents_of(ng);
+                let (dp_du, dp_dv) = tangents_if(tangents, || tangents_of(ng));
                 Hit {
                     t,
                     p: center + ng * radius,
@@ -419,7 +428,7 @@ impl Primitive {
             }
             Primitive::Disk { disk, shape } => {
                 let p = disk.to_world.transform_point3(Vec3::new(h.a, h.b, 0.0));
-                let (dp_du, dp_dv) = tangents_of(disk.normal);
+                let (dp_du, dp_dv) = tangents_if(tangents, || tangents_of(disk.normal));
                 Hit {
                     t: h.t,
                     p,
@@ -454,6 +463,16 @@ pub fn uv_tangents(p: &[Vec3; 3], uv: &[Vec2; 3]) -> Option<(Vec3, Vec3)> {
     let dp_du = (dp0 * duv1.y - dp1 * duv0.y) * inv;
     let dp_dv = (dp1 * duv0.x - dp0 * duv1.x) * inv;
     (dp_du.is_finite() && dp_dv.is_finite()).then_some((dp_du, dp_dv))
+}
+
+/// `tangents()` if they are wanted, else zero.
+#[inline(always)]
+fn tangents_if(wanted: bool, tangents: impl FnOnce() -> (Vec3, Vec3)) -> (Vec3, Vec3) {
+    if wanted {
+        tangents()
+    } else {
+        (Vec3::ZERO, Vec3::ZERO)
+    }
 }
 
 /// The two tangents of the unit normal `n`'s coordinate system (Mitsuba's
