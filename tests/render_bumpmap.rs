@@ -30,6 +30,7 @@ use fireflies::render::scene::{Rgb, SceneDesc};
 use fireflies::render::shapes::{Ray, primitives};
 use fireflies::render::textures::Texture;
 use fireflies::render::textures::bitmap::{Bitmap, Filter, Wrap};
+use fireflies::render::world::World;
 use glam::{Mat3, Vec2, Vec3};
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -569,4 +570,35 @@ fn bumped_plate_tilts_the_rendered_normal_feature() {
         bumped > 0.05,
         "a bumped plate's normals differ by only {bumped} rad"
     );
+}
+
+/// Hits skip the tangents in a scene no BSDF of which reads them, and carry them (Mitsuba's
+/// `dp_du`, `dp_dv` of the rectangle: `2x`, `2y`) wherever a bump map sits, also inside
+/// `twosided` or `mask`. A wrapper that did not pass the question on would bump with zero
+/// tangents, i.e. not at all; caught here.
+#[test]
+fn hits_carry_tangents_where_a_bsdf_reads_them() {
+    let bump = format!("<bsdf type=\"bumpmap\">{HEIGHT}<bsdf type=\"diffuse\"/></bsdf>");
+    let opacity = "<float name=\"opacity\" value=\"0.5\"/>";
+    for (bsdf, tangents) in [
+        ("<bsdf type=\"diffuse\"/>".to_string(), false),
+        (
+            "<bsdf type=\"twosided\"><bsdf type=\"diffuse\"/></bsdf>".to_string(),
+            false,
+        ),
+        (bump.clone(), true),
+        (format!("<bsdf type=\"twosided\">{bump}</bsdf>"), true),
+        (format!("<bsdf type=\"mask\">{opacity}{bump}</bsdf>"), true),
+    ] {
+        let scene = load(&format!("<shape type=\"rectangle\">{bsdf}</shape>")).expect("loads");
+        let world = World::new(&scene);
+        let ray = Ray::new(Vec3::new(0.2, 0.1, 2.0), Vec3::new(0.0, 0.0, -1.0));
+        let hit = world.bvh.intersect(&ray, 0.0, f32::INFINITY).expect("hits");
+        let want = if tangents {
+            (Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0))
+        } else {
+            (Vec3::ZERO, Vec3::ZERO)
+        };
+        assert_eq!((hit.dp_du, hit.dp_dv), want, "{bsdf}");
+    }
 }
