@@ -259,8 +259,14 @@ impl Bitmap {
         }
     }
 
+    #[inline]
     fn wrap_index(&self, i: i64, n: usize) -> usize {
         let n = n as i64;
+        // Inside the image every mode keeps the index: skip the integer divisions (four per
+        // bilinear lookup, each slower than the rest of the lookup's arithmetic).
+        if (0..n).contains(&i) {
+            return i as usize;
+        }
         let j = match self.wrap {
             Wrap::Clamp => i.clamp(0, n - 1),
             Wrap::Repeat => i.rem_euclid(n),
