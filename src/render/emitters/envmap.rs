@@ -823,7 +823,7 @@ mod tests {
 
     /// The offset into a row from the `asin` series against `atan2` in f64, on rows as wide as
     /// the series is used for (16 rows) and as narrow as a 2048x1024 map's, over random
-    /// directions inside each row: within 2e-7 (three f32 ulps of 1). A series cut one term
+    /// directions inside each row: within 2e-7 (about three f32 ulps of 1). A series cut one term
     /// short errs by 2e-6 on the wide rows; a sign slip in the angle difference, or the row's
     /// own angle from the wrong row, is off by whole rows. The f32 formula it replaced,
     /// `atan2(sin θ, cos θ)·rows/π − j`, erred by up to 1.3e-4 on the narrow rows (ulps of θ

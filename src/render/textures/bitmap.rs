@@ -263,7 +263,7 @@ impl Bitmap {
     fn wrap_index(&self, i: i64, n: usize) -> usize {
         let n = n as i64;
         // Inside the image every mode keeps the index: skip the integer divisions (four per
-        // bilinear lookup, each slower than the rest of the lookup's arithmetic).
+        // bilinear lookup).
         if (0..n).contains(&i) {
             return i as usize;
         }
