@@ -359,14 +359,13 @@ impl Bvh {
             return self.leaf::<ANY>(leaf, &RayPre::new(ray), tmin, &mut t_best, best);
         }
         let slab = SlabRay::new(ray.o, ray.d);
-        let mut pre: Option<RayPre> = None;
+        let pre = RayPre::new(ray);
         // ArrayVec: no zero-fill of the whole stack on every ray.
         let mut stack: ArrayVec<(Child, f32), STACK> = ArrayVec::new();
         let mut next = Child(0);
         loop {
             if next.is_leaf() {
-                let pre = pre.get_or_insert_with(|| RayPre::new(ray));
-                if self.leaf::<ANY>(next, pre, tmin, &mut t_best, best) && ANY {
+                if self.leaf::<ANY>(next, &pre, tmin, &mut t_best, best) && ANY {
                     return true;
                 }
             } else {
