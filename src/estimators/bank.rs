@@ -154,7 +154,8 @@ impl Bank {
 /// The film's bank: the RGB estimators of one pixel over its stream of RGB samples, with the
 /// sharing rule of [`Bank`] applied per channel (the MoN family keeps one partition per
 /// channel). Each block is split into channels once, in chunks of 64 samples, for all
-/// per-channel estimators. The specs and the sharing plan are the same for every pixel, so
+/// per-channel estimators, and not at all when none reads the split (a bank of `mean` alone,
+/// as the cross-check against Mitsuba renders). The specs and the sharing plan are the same for every pixel, so
 /// banks made with [`RgbBank::empty_like`] share them: a pixel pays one pointer for them.
 pub struct RgbBank {
     estimators: Vec<Box<dyn RgbEstimator>>,
@@ -167,6 +168,8 @@ struct Plan {
     specs: Vec<EstimatorSpec>,
     /// Per estimator, where the three partitions it adopts are kept.
     adopts: Vec<Option<Leader>>,
+    /// Whether some estimator reads the block split into channels (else the split is skipped).
+    split: bool,
 }
 
 impl RgbBank {
@@ -185,6 +188,7 @@ impl RgbBank {
         let plan = Plan {
             specs: specs.to_vec(),
             adopts: leaders(&sets),
+            split: estimators.iter().any(|e| e.reads_channels()),
         };
         Ok(RgbBank {
             estimators,
@@ -207,6 +211,13 @@ impl RgbBank {
     /// is traced (to count and leave out the bad ones), so checking again here would be a
     /// second pass over every sample.
     pub fn push_slice(&mut self, samples: &[[f64; 3]]) {
+        if !self.plan.split {
+            for e in &mut self.estimators {
+                e.push_slice(samples);
+            }
+            self.count += samples.len() as u64;
+            return;
+        }
         for_each_chunk(samples, |chunk, channels| {
             for i in 0..self.estimators.len() {
                 let (done, rest) = self.estimators.split_at_mut(i);

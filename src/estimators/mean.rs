@@ -2,8 +2,7 @@
 //! compared with. Compensated summation keeps it exact over 10^8-sample streams, and the
 //! sum's rescaling keeps it finite for any finite samples (`[1e308; 3]` has mean `1e308`).
 
-use super::numeric::ScaledSum;
-use super::rgb::per_channel;
+use super::numeric::{ScaledSum, add_all_rgb};
 use super::{Estimator, EstimatorSpec, Key, Method, RgbEstimator, empty};
 use crate::error::Result;
 use std::fmt;
@@ -22,7 +21,7 @@ impl Method for MeanSpec {
     }
 
     fn build_rgb(&self) -> Result<Box<dyn RgbEstimator>> {
-        per_channel(|| Ok(Mean::new()))
+        Ok(Box::new(MeanRgb::default()))
     }
 }
 
@@ -85,5 +84,47 @@ impl Estimator for Mean {
 
     fn reset(&mut self) {
         *self = Self::default();
+    }
+}
+
+/// The mean of an RGB stream: in each channel bit for bit the [`Mean`] of that channel's
+/// stream (the same compensated sums, in the same order), with the three channels' sums
+/// updated together ([`add_all_rgb`]). The film pushes every sample of a render through it;
+/// as three scalar means behind the per-channel split it cost about 70 instructions a sample.
+#[derive(Debug, Clone, Default)]
+struct MeanRgb {
+    sums: [ScaledSum; 3],
+    n: u64,
+}
+
+impl fmt::Display for MeanRgb {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Mean[RGB]")
+    }
+}
+
+impl RgbEstimator for MeanRgb {
+    fn push_slice(&mut self, samples: &[[f64; 3]]) {
+        add_all_rgb(&mut self.sums, samples);
+        self.n += samples.len() as u64;
+    }
+
+    fn count(&self) -> u64 {
+        self.n
+    }
+
+    fn estimate(&self) -> Result<[f64; 3]> {
+        if self.n == 0 {
+            return Err(empty(self));
+        }
+        Ok(self.sums.map(|s| s.mean(self.n)))
+    }
+
+    fn state_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+    }
+
+    fn spec(&self) -> EstimatorSpec {
+        EstimatorSpec::Mean(MeanSpec)
     }
 }

@@ -20,6 +20,8 @@
 //! checks each `s + x` before instead. Single pushes check each addition, with one
 //! comparison.
 
+use wide::f64x4;
+
 /// Plain running sums are kept below this magnitude, `2^1023`; see the module docs.
 const SUM_LIMIT: f64 = f64::from_bits(0x7FE0_0000_0000_0000);
 
@@ -233,6 +235,49 @@ impl ScaledSum {
     #[inline]
     pub(crate) fn mean(&self, count: u64) -> f64 {
         self.acc.mean_of(self.scaled, count as f64)
+    }
+}
+
+/// [`ScaledSum::add_all`] of channel `c` of every sample to `sums[c]`, for the three channels
+/// of an RGB stream (finite, non-negative terms): bit for bit the three calls, with the three
+/// running sums and compensations held in the lanes of one `f64x4`, so that a sample costs one
+/// vector step instead of three scalar ones and the branch on which term is larger becomes a
+/// blend (that branch is taken at random on noisy samples). As in `add_all`, the limit is
+/// checked at the end of the block, and a channel that passed it is redone term by term.
+pub(crate) fn add_all_rgb(sums: &mut [ScaledSum; 3], samples: &[[f64; 3]]) {
+    if sums.iter().any(|s| s.scaled) {
+        for (c, s) in sums.iter_mut().enumerate() {
+            s.add_all(samples.iter().map(|p| p[c]));
+        }
+        return;
+    }
+    let lanes = |f: fn(&Neumaier) -> f64| {
+        f64x4::new([f(&sums[0].acc), f(&sums[1].acc), f(&sums[2].acc), 0.0])
+    };
+    let (start_sum, start_compensation) = (lanes(|a| a.sum), lanes(|a| a.compensation));
+    let (mut sum, mut compensation) = (start_sum, start_compensation);
+    for p in samples {
+        let x = f64x4::new([p[0], p[1], p[2], 0.0]);
+        // Neumaier::add, lane by lane.
+        let t = sum + x;
+        let sum_larger = sum.abs().simd_ge(x.abs());
+        compensation += sum_larger.bitselect((sum - t) + x, (x - t) + sum);
+        sum = t;
+    }
+    let (sum, compensation) = (sum.to_array(), compensation.to_array());
+    let (start_sum, start_compensation) = (start_sum.to_array(), start_compensation.to_array());
+    for (c, s) in sums.iter_mut().enumerate() {
+        s.acc = Neumaier {
+            sum: sum[c],
+            compensation: compensation[c],
+        };
+        if !s.acc.below_limit() {
+            s.acc = Neumaier {
+                sum: start_sum[c],
+                compensation: start_compensation[c],
+            };
+            s.add_each(samples.iter().map(|p| p[c]));
+        }
     }
 }
 

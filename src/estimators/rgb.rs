@@ -6,7 +6,7 @@
 //! Pajot's methods classify by luminance (Rec. 709 weights 0.2126, 0.7152, 0.0722) and apply
 //! their weight or decision to the RGB sample, as in their papers."
 //!
-//! * **Per channel** (`mean`, `clamp`, `mon`, `gini`, `gmonb`, `gmon`, `jung`): three scalar
+//! * **Per channel** (`clamp`, `mon`, `gini`, `gmonb`, `gmon`, `jung`): three scalar
 //!   estimators, one per channel; the estimate of channel `c` is the scalar estimator's estimate
 //!   of the channel-`c` stream. A block of samples is split into channels through stack
 //!   buffers ([`CHUNK`] samples a channel, not part of the pixel's state), so each channel sees
@@ -14,6 +14,9 @@
 //!   [`RgbBank`](super::RgbBank) splits once for all its estimators and lets the MoN family
 //!   share partitions per channel. `jung` in image mode takes one `σ_image` per channel
 //!   ([`RgbEstimator::set_image_sigma`]).
+//! * **Mean** (`mean`): per channel as well, with the same result bit for bit as three scalar
+//!   means, but the three channels are summed together in one SIMD step per sample and the
+//!   block is not split (`super::mean`).
 //! * **Zirr** (`zirr`, `zirr-ref`): the cascade runs on the luminance `L` of each sample, exactly
 //!   as the scalar method on the luminance stream (same `N`, buffers, counts, weights). Beside
 //!   each luminance buffer the pixel keeps an RGB buffer, into which each sample's RGB goes with
@@ -140,6 +143,12 @@ pub trait RgbEstimator: Send + Sync + fmt::Display {
         let _ = (channels, shared);
         self.push_slice(samples);
     }
+    /// Whether [`RgbEstimator::push_channels`] reads the block split into channels; a bank
+    /// none of whose estimators does skips the split. False by default, as the default
+    /// `push_channels` ignores the split.
+    fn reads_channels(&self) -> bool {
+        false
+    }
 }
 
 /// Most samples split into channels at a time: three 512-byte stack buffers (zeroed on every
@@ -227,6 +236,10 @@ impl<E: Estimator + 'static> RgbEstimator for PerChannel<E> {
     fn channel_partitions(&self) -> [&[Partition]; 3] {
         let [r, g, b] = &self.ch;
         [r.partitions(), g.partitions(), b.partitions()]
+    }
+
+    fn reads_channels(&self) -> bool {
+        true
     }
 
     fn push_channels(
