@@ -155,8 +155,9 @@ impl Bank {
 /// sharing rule of [`Bank`] applied per channel (the MoN family keeps one partition per
 /// channel). Each block is split into channels once, in chunks of 64 samples, for all
 /// per-channel estimators, and not at all when none reads the split (a bank of `mean` alone,
-/// as the cross-check against Mitsuba renders). The specs and the sharing plan are the same for every pixel, so
-/// banks made with [`RgbBank::empty_like`] share them: a pixel pays one pointer for them.
+/// as the cross-check against Mitsuba renders). The specs and the sharing plan are the same
+/// for every pixel, so banks made with [`RgbBank::empty_like`] share them: a pixel pays one
+/// pointer for them.
 pub struct RgbBank {
     estimators: Vec<Box<dyn RgbEstimator>>,
     plan: Arc<Plan>,

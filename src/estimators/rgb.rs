@@ -143,6 +143,7 @@ pub trait RgbEstimator: Send + Sync + fmt::Display {
         let _ = (channels, shared);
         self.push_slice(samples);
     }
+
     /// Whether [`RgbEstimator::push_channels`] reads the block split into channels; a bank
     /// none of whose estimators does skips the split. False by default, as the default
     /// `push_channels` ignores the split.
