@@ -298,8 +298,8 @@ fn per_channel_estimators_are_three_scalar_estimators() {
 }
 
 /// The RGB mean sums its three channels together in SIMD lanes; it must stay three scalar
-/// means bit for bit where the sums are delicate: one channel overflowing `2^1023` in the
-/// middle of a block (its block is redone and rescaled, the others keep theirs), tiny and huge
+/// means bit for bit where the sums are delicate: red and green overflowing `2^1023` in the
+/// middle of a block (their block is redone and rescaled, blue keeps its own), tiny and huge
 /// terms together, zeros, single samples, all-equal streams and blocks of every length around
 /// the bank's 64-sample chunk. Fails on any lane mix-up, a dropped compensation or a wrong
 /// undo.

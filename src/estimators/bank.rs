@@ -212,22 +212,21 @@ impl RgbBank {
     /// is traced (to count and leave out the bad ones), so checking again here would be a
     /// second pass over every sample.
     pub fn push_slice(&mut self, samples: &[[f64; 3]]) {
-        if !self.plan.split {
+        if self.plan.split {
+            for_each_chunk(samples, |chunk, channels| {
+                for i in 0..self.estimators.len() {
+                    let (done, rest) = self.estimators.split_at_mut(i);
+                    let shared = self.plan.adopts[i]
+                        .map(|(l, k)| done[l].channel_partitions().map(|p| &p[k]))
+                        .filter(|p| chunk.len() >= p[0].sets());
+                    rest[0].push_channels(chunk, channels, shared);
+                }
+            });
+        } else {
             for e in &mut self.estimators {
                 e.push_slice(samples);
             }
-            self.count += samples.len() as u64;
-            return;
         }
-        for_each_chunk(samples, |chunk, channels| {
-            for i in 0..self.estimators.len() {
-                let (done, rest) = self.estimators.split_at_mut(i);
-                let shared = self.plan.adopts[i]
-                    .map(|(l, k)| done[l].channel_partitions().map(|p| &p[k]))
-                    .filter(|p| chunk.len() >= p[0].sets());
-                rest[0].push_channels(chunk, channels, shared);
-            }
-        });
         self.count += samples.len() as u64;
     }
 
