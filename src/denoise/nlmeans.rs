@@ -14,6 +14,13 @@
 //! is `exp(−max(0, D))`. Subtracting the variances removes the expected squared difference that
 //! noise alone produces, so a noisy guide does not look dissimilar to itself.
 //!
+//! **Optionally the pair itself also counts** ([`NlMeansParams::pair_distance`]): `D` is then
+//! the larger of that patch mean and `d(p, q)` of the two pixels alone. A detail smaller than a
+//! patch (a light one or two pixels wide) holds a few of its 49 offsets, so by the patch mean
+//! alone every neighbour looks like it and it like them. Off in the paper's filter; NFOR turns it
+//! on for its feature filters ([`super::nfor`]). It costs some smoothing: an equal-variance pair
+//! of the same mean has `d > 1/k²` (a weight below `e^(−1/k²)`) with probability 16%.
+//!
 //! Choices the papers leave open, as made here:
 //! * Near the border a patch is cut to the pixels `p'` for which both `p'` and `p' + δ` lie in
 //!   the image, and the distance is the mean over those; pixels whose `q` leaves the image get
@@ -48,6 +55,9 @@ pub struct NlMeansParams {
     pub window_radius: usize,
     /// Bandwidth `k`: larger accepts more dissimilar neighbours.
     pub k: f32,
+    /// Whether a distance is at least that of the pixel pair alone (module docs): on for the
+    /// feature filters, off where the weights must not follow one pixel's own noise.
+    pub pair_distance: bool,
 }
 
 impl NlMeansParams {
@@ -74,7 +84,16 @@ impl NlMeansParams {
             patch_radius,
             window_radius,
             k,
+            pair_distance: false,
         })
+    }
+
+    /// The same, with the pair's own distance as a floor (or without).
+    pub fn with_pair_distance(self, on: bool) -> Self {
+        NlMeansParams {
+            pair_distance: on,
+            ..self
+        }
     }
 }
 
@@ -187,8 +206,9 @@ pub(crate) struct Guide<'a> {
     pub height: usize,
 }
 
-/// Patch-averaged distances of `guide` between each pixel `p` of `rect` and `p + (dx, dy)`,
-/// into `out` (row-major over `rect`); `+∞` where `p + (dx, dy)` leaves the image.
+/// Patch-averaged distances of `guide` between each pixel `p` of `rect` and `p + (dx, dy)`, or
+/// the pair's own distance where that is larger (module docs), into `out` (row-major over
+/// `rect`); `+∞` where `p + (dx, dy)` leaves the image.
 ///
 /// The per-pixel distances are laid out with a margin of `f` zeros wherever a pixel or its
 /// partner is missing, so that the patch sums are plain shifted additions (which vectorise);
@@ -202,6 +222,7 @@ pub(crate) fn patch_distances(
     dy: isize,
     f: usize,
     k: f32,
+    pair: bool,
     scratch: &mut Scratch,
     out: &mut [f32],
 ) {
@@ -269,8 +290,15 @@ pub(crate) fn patch_distances(
         let o = (y - rect.y0) * rect.width() + (ox0 - rect.x0);
         let dst = &mut out[o..o + ow];
         let sums = &scratch.cols[r0 * bw..r0 * bw + ow];
-        for ((d, s), cx) in dst.iter_mut().zip(sums).zip(&scratch.cx) {
+        for (d, (s, cx)) in dst.iter_mut().zip(sums.iter().zip(&scratch.cx)) {
             *d = s / (cx * ny);
+        }
+        if pair {
+            // The pair's own distance sits at the buffer's offset (f, f) from the output pixel.
+            let own = &scratch.dist[(r0 + f) * bw + f..][..ow];
+            for (d, own) in dst.iter_mut().zip(own) {
+                *d = d.max(*own);
+            }
         }
     }
 }
@@ -432,6 +460,7 @@ impl pulp::WithSimd for FilterTile<'_> {
                             dy,
                             params.patch_radius,
                             params.k,
+                            params.pair_distance,
                             scratch,
                             dist,
                         );
@@ -508,11 +537,31 @@ mod tests {
             y1: 1,
         };
         let mut out = [0.0; 2];
-        patch_distances(g, rect, 1, 0, 0, 1.0, &mut Scratch::default(), &mut out);
+        patch_distances(
+            g,
+            rect,
+            1,
+            0,
+            0,
+            1.0,
+            false,
+            &mut Scratch::default(),
+            &mut out,
+        );
         assert!((out[0] - 3.25 / 0.75).abs() < 1e-6, "{}", out[0]);
         assert_eq!(out[1], f32::INFINITY, "its partner is outside the image");
         // From pixel 1 towards 0: v_p = 0.25, min(v_p, v_q) = 0.25.
-        patch_distances(g, rect, -1, 0, 0, 1.0, &mut Scratch::default(), &mut out);
+        patch_distances(
+            g,
+            rect,
+            -1,
+            0,
+            0,
+            1.0,
+            false,
+            &mut Scratch::default(),
+            &mut out,
+        );
         assert!((out[1] - 3.5 / 0.75).abs() < 1e-6, "{}", out[1]);
     }
 
@@ -535,7 +584,17 @@ mod tests {
             y1: 1,
         };
         let mut out = [0.0; 3];
-        patch_distances(g, rect, 1, 0, 1, 1.0, &mut Scratch::default(), &mut out);
+        patch_distances(
+            g,
+            rect,
+            1,
+            0,
+            1,
+            1.0,
+            false,
+            &mut Scratch::default(),
+            &mut out,
+        );
         // d(0,1) = 4/ε clamped to 1e4; d(1,2) = 0. Pixel 0: mean of {1e4, 0}; pixel 1: the
         // same two (pixel 2's partner is outside).
         assert_eq!(out[0], DISTANCE_CLAMP / 2.0);
@@ -571,6 +630,34 @@ mod tests {
         };
         let (before, after) = (spread(noise.plane(0)), spread(out.plane(0)));
         assert!(after < before / 10.0, "variance {before} -> {after}");
+    }
+
+    /// A one-pixel light in a flat guide (value 100 with the variance of a partly covered pixel,
+    /// 2500; the rest 0.05 with 1e-4): the pair distance between the light and a neighbour is
+    /// 16 at k = 0.5, but it is one of 49 offsets of a 7x7 patch whose other pairs count about
+    /// −4 each (noise-free pixels of stated variance), so by the patch mean alone the light looks
+    /// like its neighbours and its value spreads over the window. With the pair's own distance
+    /// both stay apart.
+    #[test]
+    fn a_detail_smaller_than_a_patch_does_not_spread() {
+        let (w, h) = (21, 21);
+        let light = |x: usize, y: usize| x == 10 && y == 10;
+        let image = planes(w, h, |x, y| if light(x, y) { 100.0 } else { 0.05 });
+        let var = planes(w, h, |x, y| if light(x, y) { 2500.0 } else { 1e-4 });
+        let p = NlMeansParams::new(3, 5, 0.5).unwrap();
+        let patch_only = nl_means(&image, &image, &var, p).unwrap();
+        assert!(patch_only.plane(0)[10 * w + 11] > 0.5, "the failure this guards against");
+        let out = nl_means(&image, &image, &var, p.with_pair_distance(true)).unwrap();
+        for y in 0..h {
+            for x in 0..w {
+                let v = out.plane(0)[y * w + x];
+                if light(x, y) {
+                    assert!(v > 99.0, "the light kept {v}");
+                } else {
+                    assert!((v - 0.05).abs() < 1e-3, "({x}, {y}) took {v} from the light");
+                }
+            }
+        }
     }
 
     /// The vectorisable exponential against `f64::exp` over its whole domain.

@@ -250,6 +250,7 @@ impl Workspace {
                     dy,
                     params.patch_radius,
                     1.0,
+                    params.pair_distance,
                     &mut self.scratch,
                     &mut self.dist,
                 );
