@@ -403,6 +403,7 @@ fn row(repeat: u32, variance: &str, relmse: f64, ssim: f64, fireflies: u64) -> D
         mean_bias_relative: Some(0.01 * f64::from(repeat)),
         firefly_pixels: fireflies,
         firefly_fraction: fireflies as f64 / 256.0,
+        worse_2x_fraction: denoised.then_some(0.01),
         render_wall_s: 1.0,
         nfor_s: denoised.then_some(2.0),
         nfor_s_per_megapixel: denoised.then_some(2.0 / 256e-6),
@@ -827,4 +828,42 @@ fn an_unknown_scene_file_fails_before_anything_runs() {
         "{err}"
     );
     assert!(!dir.join("report").join("denoise.csv").exists());
+}
+
+/// A pixel counts as made worse by more than 2x when NFOR's relative error is over twice the
+/// noisy input's and visible (relMSE term above 0.01): of four pixels against a reference of
+/// 1, the noisy errors 0.1, 0.1, 0.001 and 0.3 become 0.25 (worse, counted), 0.15 (worse, under
+/// 2x), 0.05 (50 times worse but 5%: not visible) and 0.1 (better).
+#[test]
+fn worse_fraction_counts_visible_errors_more_than_doubled() {
+    use fireflies::image::Image;
+    use fireflies::scenes::denoise_run::worse_fraction;
+    let img = |v: [f32; 4]| Image::from_pixels(2, 2, v.iter().map(|&x| [x; 3]).collect()).unwrap();
+    let reference = img([1.0; 4]);
+    let noisy = img([1.1, 0.9, 1.001, 1.3]);
+    let denoised = img([1.25, 1.15, 0.95, 1.1]);
+    assert_eq!(worse_fraction(&noisy, &denoised, &reference), 0.25);
+    assert_eq!(worse_fraction(&noisy, &noisy, &reference), 0.0);
+}
+
+/// The montage's crop is where the image is worst against the reference, wherever that is:
+/// a 3x3 block of error in the bottom-right corner of a 12x10 image, and nothing else.
+#[test]
+fn worst_window_finds_the_largest_error() {
+    use fireflies::image::Image;
+    use fireflies::scenes::run::worst_window;
+    let reference = Image::from_pixels(12, 10, vec![[0.5; 3]; 120]).unwrap();
+    let mut px = vec![[0.5f32; 3]; 120];
+    for y in 7..10 {
+        for x in 9..12 {
+            px[y * 12 + x] = [2.0; 3];
+        }
+    }
+    px[0] = [0.6; 3]; // a small error elsewhere
+    let test = Image::from_pixels(12, 10, px).unwrap();
+    assert_eq!(worst_window(&test, &reference, 3).unwrap(), [9, 7, 3]);
+    assert!(
+        worst_window(&test, &reference, 11).is_err(),
+        "larger than a side"
+    );
 }

@@ -646,7 +646,10 @@ mod tests {
         let var = planes(w, h, |x, y| if light(x, y) { 2500.0 } else { 1e-4 });
         let p = NlMeansParams::new(3, 5, 0.5).unwrap();
         let patch_only = nl_means(&image, &image, &var, p).unwrap();
-        assert!(patch_only.plane(0)[10 * w + 11] > 0.5, "the failure this guards against");
+        assert!(
+            patch_only.plane(0)[10 * w + 11] > 0.5,
+            "the failure this guards against"
+        );
         let out = nl_means(&image, &image, &var, p.with_pair_distance(true)).unwrap();
         for y in 0..h {
             for x in 0..w {
@@ -654,7 +657,10 @@ mod tests {
                 if light(x, y) {
                     assert!(v > 99.0, "the light kept {v}");
                 } else {
-                    assert!((v - 0.05).abs() < 1e-3, "({x}, {y}) took {v} from the light");
+                    assert!(
+                        (v - 0.05).abs() < 1e-3,
+                        "({x}, {y}) took {v} from the light"
+                    );
                 }
             }
         }

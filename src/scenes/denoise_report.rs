@@ -74,6 +74,11 @@ pub struct DenoiseCell {
     pub firefly_pixels_se: Option<f64>,
     /// Its interval's half-width.
     pub firefly_pixels_ci95: Option<f64>,
+    /// Denoised cells: mean fraction of pixels NFOR made worse by more than a factor 2
+    /// ([`super::denoise_run::worse_fraction`]).
+    pub worse_2x_fraction_mean: Option<f64>,
+    /// Its interval's half-width.
+    pub worse_2x_fraction_ci95: Option<f64>,
     /// Mean relative bias of the image-mean luminance (empty if any repeat has none).
     pub mean_bias_relative_mean: Option<f64>,
     /// Its standard error.
@@ -130,6 +135,7 @@ pub fn denoise_cells(rows: &[DenoiseRow]) -> Vec<DenoiseCell> {
             let (ssim_mean, ssim_se, ssim_ci95) = metric(&own, |r| Some(r.ssim));
             let (ff_mean, ff_se, ff_ci95) = metric(&own, |r| Some(r.firefly_pixels as f64));
             let (bias_mean, bias_se, bias_ci95) = metric(&own, |r| r.mean_bias_relative);
+            let (worse_mean, _, worse_ci95) = metric(&own, |r| r.worse_2x_fraction);
             let (nfor_s_mean, _, _) = metric(&own, |r| r.nfor_s);
             let (mp_mean, mp_se, mp_ci95) = metric(&own, |r| r.nfor_s_per_megapixel);
             Some(DenoiseCell {
@@ -155,6 +161,8 @@ pub fn denoise_cells(rows: &[DenoiseRow]) -> Vec<DenoiseCell> {
                 firefly_pixels_mean: ff_mean.unwrap_or(f64::NAN),
                 firefly_pixels_se: ff_se,
                 firefly_pixels_ci95: ff_ci95,
+                worse_2x_fraction_mean: worse_mean,
+                worse_2x_fraction_ci95: worse_ci95,
                 mean_bias_relative_mean: bias_mean,
                 mean_bias_relative_se: bias_se,
                 mean_bias_relative_ci95: bias_ci95,
@@ -809,7 +817,9 @@ fn summary_md(
     s.push_str("## Per scene: every metric\n\n");
     s.push_str(
         "relMSE as above; SSIM of the display luma (higher is better); firefly pixels by the \
-         rule above; relative bias = image-mean luminance over the reference's, minus 1; NFOR \
+         rule above; px worse > 2x = the share of pixels whose relative error NFOR more than \
+         doubled over its noisy input's, counting only errors above 10% (per-pixel relMSE term \
+         above 0.01); relative bias = image-mean luminance over the reference's, minus 1; NFOR \
          wall seconds and seconds per megapixel.",
     );
     if exp.repeats >= 2 {
@@ -836,13 +846,13 @@ fn summary_md(
             info.reference_spp
         );
         s.push_str(
-            "| spp | source | variance | stage | relMSE | relMSE, geometric mean [95%] | SSIM | firefly px | rel. bias | NFOR s | NFOR s/MP |\n\
-             |---:|---|---|---|---:|---:|---:|---:|---:|---:|---:|\n",
+            "| spp | source | variance | stage | relMSE | relMSE, geometric mean [95%] | SSIM | firefly px | px worse > 2x | rel. bias | NFOR s | NFOR s/MP |\n\
+             |---:|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         for r in cells.iter().filter(|r| r.scene == info.scene) {
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 r.spp,
                 r.label,
                 if r.variance.is_empty() {
@@ -865,6 +875,12 @@ fn summary_md(
                         format!("{v:.1}")
                     })
                 },
+                opt(r.worse_2x_fraction_mean, |v| {
+                    match r.worse_2x_fraction_ci95 {
+                        Some(h) => format!("{:.2}% ± {:.2}%", 100.0 * v, 100.0 * h),
+                        None => format!("{:.2}%", 100.0 * v),
+                    }
+                }),
                 opt(r.mean_bias_relative_mean, |v| {
                     match r.mean_bias_relative_ci95 {
                         Some(h) => format!("{:+.2}% ± {:.2}%", 100.0 * v, 100.0 * h),
@@ -1081,8 +1097,9 @@ fn summary_md(
         "## Figures\n\n\
          - `relmse_vs_spp.png`, `ssim_vs_spp.png`: per scene against spp; one colour per \
          source, dashed its noisy estimate, solid NFOR's output{}.\n\
-         - `montage.png`: per scene, the crop holding the most firefly pixels of the noisy mean, \
-         for the reference, every noisy estimate and every NFOR output, from the first repeat \
+         - `montage.png`: per scene, the crop where NFOR of the mean is worst (the largest sum of \
+         relMSE's per-pixel terms), for the reference, every noisy estimate and every NFOR \
+         output, from the first repeat \
          (seed {}).\n",
         if exp.repeats < 2 {
             String::new()

@@ -6,7 +6,7 @@
 
 use super::denoise_experiment::{DenoiseExperiment, DenoiseScene, variance_name};
 use super::nfor_input::{ColorSource, VarianceSource, nfor_input};
-use super::run::{crop_size, ensure_reference, firefly_window, load_world};
+use super::run::{crop_size, ensure_reference, load_world, pixel_relmse, worst_window};
 use crate::denoise::nfor::{NforParams, StageSeconds, nfor};
 use crate::error::{Error, Result};
 use crate::image::Image;
@@ -62,6 +62,9 @@ pub struct DenoiseRow {
     pub firefly_pixels: u64,
     /// Their fraction of the image.
     pub firefly_fraction: f64,
+    /// Denoised rows: the fraction of pixels NFOR made worse by more than a factor 2 (see
+    /// [`worse_fraction`]); empty for the noisy estimate.
+    pub worse_2x_fraction: Option<f64>,
     /// Wall seconds of the render (every source of this spp comes from the same one).
     pub render_wall_s: f64,
     /// Wall seconds of NFOR (denoised rows).
@@ -160,6 +163,28 @@ pub struct DenoiseSceneResult {
     /// Labelled images at the montage's spp, first repeat: per source the noisy estimate, then
     /// NFOR's output per variance.
     pub montage: Vec<(String, Image)>,
+}
+
+/// Above this per-pixel relative squared error (relMSE's term) an error is visible: a relative
+/// error of about 10% on a pixel brighter than 0.1.
+pub const VISIBLE_ERROR: f64 = 0.01;
+
+/// The fraction of pixels NFOR made worse by more than a factor 2: its relative error at the
+/// pixel (the square root of relMSE's term, [`pixel_relmse`]) more than twice the noisy
+/// input's, and visible ([`VISIBLE_ERROR`]). The second condition keeps a pixel that the
+/// noisy input happened to hit almost exactly from counting when NFOR is merely close.
+pub fn worse_fraction(noisy: &Image, denoised: &Image, reference: &Image) -> f64 {
+    let worse = noisy
+        .pixels()
+        .iter()
+        .zip(denoised.pixels())
+        .zip(reference.pixels())
+        .filter(|((n, d), r)| {
+            let (e_noisy, e_nfor) = (pixel_relmse(**n, **r), pixel_relmse(**d, **r));
+            e_nfor > 4.0 * e_noisy && e_nfor > VISIBLE_ERROR
+        })
+        .count();
+    worse as f64 / reference.pixels().len().max(1) as f64
 }
 
 /// Asks Linux to reset this process's peak resident memory (`VmHWM`), so that the next read
@@ -345,6 +370,7 @@ pub fn run_denoise_scene(
             mean_bias_relative: m.mean_bias_relative,
             firefly_pixels: m.firefly_pixels,
             firefly_fraction: m.firefly_fraction,
+            worse_2x_fraction: None,
             render_wall_s: wall,
             nfor_s: None,
             nfor_s_per_megapixel: None,
@@ -372,9 +398,6 @@ pub fn run_denoise_scene(
             let at_montage = spp == exp.montage_spp && repeat == 0;
             if at_montage {
                 montage.push((source.label.clone(), noisy.clone()));
-                if source.color == ColorSource::Mean || crop_probe.is_none() {
-                    crop_probe = Some(noisy.clone());
-                }
             }
             for &v in &source.variances {
                 let run = denoise(&buffers, &source.color, v, &params, &ref_image)?;
@@ -392,6 +415,7 @@ pub fn run_denoise_scene(
                     run.seconds
                 ));
                 let mut r = row(source, variance_name(v), DENOISED, &m);
+                r.worse_2x_fraction = Some(worse_fraction(noisy, &run.image, &ref_image));
                 r.nfor_s = Some(run.seconds);
                 r.nfor_s_per_megapixel = Some(run.seconds / megapixels);
                 r.prefilter_s = Some(run.stages.prefilter);
@@ -411,6 +435,9 @@ pub fn run_denoise_scene(
                 mse.extend(mse_rows(&key, &run, reference_variance));
                 rows.push(r);
                 if at_montage {
+                    if source.color == ColorSource::Mean && crop_probe.is_none() {
+                        crop_probe = Some(run.image.clone());
+                    }
                     montage.push((format!("+ NFOR, {} var.", variance_name(v)), run.image));
                 }
             }
@@ -450,13 +477,9 @@ pub fn run_denoise_scene(
         }
     }
 
+    // The montage shows where NFOR of the mean did worst, wherever that is.
     let crop = match &crop_probe {
-        Some(img) => firefly_window(
-            img,
-            &ref_image,
-            crop_size(scene.width, scene.height),
-            exp.rule,
-        )?,
+        Some(img) => worst_window(img, &ref_image, crop_size(scene.width, scene.height))?,
         None => [0, 0, crop_size(scene.width, scene.height) as u32],
     };
     let info = DenoiseSceneInfo {

@@ -207,6 +207,26 @@ fn save_reference(reference: &Reference, exr: &Path, trace_wall_s: Option<f64>) 
     reference.save(exr, extra)
 }
 
+/// Both images of one size, and a window that fits in them.
+fn check_window(test: &Image, reference: &Image, size: usize) -> Result<()> {
+    let (w, h) = (test.width(), test.height());
+    if (reference.width(), reference.height()) != (w, h) {
+        return Err(Error::param(
+            "reference",
+            format!("{}x{}", reference.width(), reference.height()),
+            format!("the image is {w}x{h}"),
+        ));
+    }
+    if size == 0 || size > w || size > h {
+        return Err(Error::param(
+            "crop size",
+            size,
+            format!("must be in 1..={}", w.min(h)),
+        ));
+    }
+    Ok(())
+}
+
 /// The `size x size` window (inside the image) holding the most firefly pixels of `test` by
 /// `rule` (the metrics' definition), ties broken by the positive excess of its display luma
 /// over the reference's: where the test image's fireflies are. A count, not a sum of values,
@@ -223,30 +243,51 @@ pub fn firefly_window(
     rule: FireflyRule,
 ) -> Result<[u32; 3]> {
     let (w, h) = (test.width(), test.height());
-    if (reference.width(), reference.height()) != (w, h) {
-        return Err(Error::param(
-            "reference",
-            format!("{}x{}", reference.width(), reference.height()),
-            format!("the image is {w}x{h}"),
-        ));
-    }
-    if size == 0 || size > w || size > h {
-        return Err(Error::param(
-            "crop size",
-            size,
-            format!("must be in 1..={}", w.min(h)),
-        ));
-    }
-    // Summed-area table of the score, with a zero row and column in front. The excess is at
-    // most 1 per pixel, so 1e-6 of it never outweighs a firefly in windows under 10^6 pixels.
+    check_window(test, reference, size)?;
+    // The excess is at most 1 per pixel, so 1e-6 of it never outweighs a firefly in windows
+    // under 10^6 pixels.
     let lum = |p: [f32; 3]| luminance(p.map(f64::from));
+    Ok(best_window(w, h, size, |x, y| {
+        let (t, r) = (test.get(x, y), reference.get(x, y));
+        let firefly = f64::from(u8::from(rule.is_firefly(lum(t), lum(r))));
+        firefly + 1e-6 * (display_luma(t) - display_luma(r)).max(0.0)
+    }))
+}
+
+/// The `size`² window of `test` with the largest sum of per-pixel relative squared error
+/// against `reference` (the mean over channels of `(x − r)² / (r² + 0.01)`, relMSE's terms):
+/// where `test` is worst, wherever that is. Returns `[x, y, size]`.
+///
+/// # Errors
+///
+/// As [`firefly_window`].
+pub fn worst_window(test: &Image, reference: &Image, size: usize) -> Result<[u32; 3]> {
+    let (w, h) = (test.width(), test.height());
+    check_window(test, reference, size)?;
+    Ok(best_window(w, h, size, |x, y| {
+        pixel_relmse(test.get(x, y), reference.get(x, y))
+    }))
+}
+
+/// One pixel's term of relMSE: the mean over channels of `(x − r)² / (r² + 0.01)`.
+pub fn pixel_relmse(x: [f32; 3], r: [f32; 3]) -> f64 {
+    (0..3)
+        .map(|c| {
+            let (x, r) = (f64::from(x[c]), f64::from(r[c]));
+            (x - r) * (x - r) / (r * r + 0.01)
+        })
+        .sum::<f64>()
+        / 3.0
+}
+
+/// The first `size`² window in row-major order with the largest sum of `score`, by a
+/// summed-area table (a zero row and column in front).
+fn best_window(w: usize, h: usize, size: usize, score: impl Fn(usize, usize) -> f64) -> [u32; 3] {
     let mut sat = vec![0.0f64; (w + 1) * (h + 1)];
     for y in 0..h {
         let mut row = 0.0;
         for x in 0..w {
-            let (t, r) = (test.get(x, y), reference.get(x, y));
-            let firefly = f64::from(u8::from(rule.is_firefly(lum(t), lum(r))));
-            row += firefly + 1e-6 * (display_luma(t) - display_luma(r)).max(0.0);
+            row += score(x, y);
             sat[(y + 1) * (w + 1) + x + 1] = sat[y * (w + 1) + x + 1] + row;
         }
     }
@@ -260,7 +301,7 @@ pub fn firefly_window(
             }
         }
     }
-    Ok([best.1 as u32, best.2 as u32, size as u32])
+    [best.1 as u32, best.2 as u32, size as u32]
 }
 
 /// The automatic crop size: a third of the shorter side, between 12 and 48 pixels.
