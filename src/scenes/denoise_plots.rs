@@ -266,11 +266,10 @@ fn montage(
     let png = draw_tiles(
         &format!("Crops before and after NFOR{tag}"),
         &[
-            "Per scene, the window holding the most firefly pixels of the noisy mean (luminance \
-             above the rule's factor times the reference's plus its floor), for the reference, \
-             then each source's noisy estimate followed by NFOR's output on its halves with each \
-             variance (\"+ NFOR\"); exposure 1, clamped, sRGB curve, nearest-neighbour \
-             enlargement."
+            "Per scene, the window where NFOR of the mean is worst (largest sum of relMSE's \
+             per-pixel terms against the reference), for the reference, then each source's noisy \
+             estimate followed by NFOR's output on its halves with each variance (\"+ NFOR\"); \
+             exposure 1, clamped, sRGB curve, nearest-neighbour enlargement."
                 .into(),
         ],
         &rows,
